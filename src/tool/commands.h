@@ -1,0 +1,10 @@
+// The rim subcommands: each file adds one to the application.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+namespace range_image_mapping::tool {
+
+void addDecodeCommand(CLI::App& app);
+
+}  // namespace range_image_mapping::tool

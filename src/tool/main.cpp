@@ -1,0 +1,20 @@
+// rim: the range_image_mapping command-line tool.
+#include "commands.h"
+
+#include <exception>
+#include <iostream>
+
+int main(int argc, char** argv) {
+  CLI::App app{"rim: LiDAR range-image odometry and mapping tools"};
+  app.require_subcommand(1);
+  range_image_mapping::tool::addDecodeCommand(app);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& error) {
+    return app.exit(error);
+  } catch (const std::exception& error) {
+    std::cerr << "rim: error: " << error.what() << "\n";
+    return 1;
+  }
+  return 0;
+}
