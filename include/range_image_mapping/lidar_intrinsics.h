@@ -85,6 +85,9 @@ class LidarModel {
   // field of view (beyond half a beam spacing past the outermost beams) or
   // closer to the beam origin than the origin offset.
   std::optional<ProjectedPixel> project(const Eigen::Vector3f& point_lidar) const;
+  // Pi with the row already known (a cloud's ring field): only the column
+  // and range are solved for.
+  std::optional<ProjectedPixel> projectOnRow(const Eigen::Vector3f& point_lidar, int row) const;
 
   // Continuous encoder column of an azimuth, in [0, W).
   float columnOfEncoderAngle(float encoder_angle_rad) const;
@@ -92,18 +95,21 @@ class LidarModel {
 
  private:
   void buildInverseAltitudeTable();
+  std::optional<ProjectedPixel> solveProjection(const Eigen::Vector3f& point, int fixed_row) const;
   int nearestRow(float sin_altitude) const;  // -1 outside the field of view
 
   LidarIntrinsics intrinsics_;
   std::vector<Eigen::Vector3f> direction_;  // unit ray per pixel, H*W
   std::vector<Eigen::Vector3f> offset_;     // beam origin term per pixel, H*W
-  std::vector<float> azimuth_offset_cos_, azimuth_offset_sin_;  // of theta_lut, per row
+  std::vector<float> azimuth_offset_;  // theta_lut
+  std::vector<float> azimuth_offset_cos_, azimuth_offset_sin_;
   // Inverse altitude LUT (over sin of the altitude): bin -> rank in altitude
   // order, at least 2H bins, fine enough that the neighbour check is exact.
   std::vector<int16_t> inverse_altitude_;
   std::vector<int> rows_by_altitude_;       // rank -> row, ascending altitude
   std::vector<float> sin_midpoint_above_;   // sin of the angle halfway to the next rank
   float table_bins_per_unit_ = 0.0f;
+  float column_per_radian_ = 0.0f;
   float accept_sin_low_ = 0.0f, accept_sin_high_ = 0.0f;
   float beam_origin_radius_ = 0.0f, beam_origin_z_ = 0.0f, beam_origin_norm_ = 0.0f;
 };

@@ -1,0 +1,80 @@
+#!/usr/bin/env bash
+# One-command set-up for a fresh Debian bookworm machine, as root.
+#   scripts/setup.sh demo   install, build, run the main job
+#   scripts/setup.sh test   install, build, run every test (unit, rostest, fuzzers)
+# Environment: RIM_DATA_DIR (default: ../shared/data next to the repository),
+#              RIM_FUZZ_SECONDS (default 60 per fuzzer), RIM_SKIP_INSTALL=1.
+set -euo pipefail
+
+mode=${1:-}
+case "$mode" in demo | test) ;; *) echo "usage: $0 demo|test" >&2; exit 2 ;; esac
+
+repository=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+workspace="$repository/.catkin_ws"
+export RIM_DATA_DIR=${RIM_DATA_DIR:-$(cd "$repository/.." && pwd)/shared/data}
+# catkin needs Debian's python3 (with catkin_pkg), not a pyenv shim earlier on PATH.
+export PATH="/usr/bin:/bin:/usr/sbin:/sbin:$PATH"
+
+packages=(
+  build-essential cmake pkg-config git
+  catkin ros-core-dev python3-roslaunch python3-rostest python3-rosbag
+  libnodeletlib-dev libnodelet-dev pluginlib-dev libtopic-tools-dev
+  libtf2-ros-dev libtf2-eigen-dev libsensor-msgs-dev libnav-msgs-dev libvisualization-msgs-dev
+  librostest-dev libgtest-dev libbenchmark-dev
+  libeigen3-dev libtbb-dev libjsoncpp-dev libpcap-dev libcli11-dev libpng-dev libssl-dev
+  libnanoflann-dev clang
+)
+
+install_dependencies() {
+  [ "${RIM_SKIP_INSTALL:-0}" = 1 ] && return
+  local missing=()
+  for package in "${packages[@]}"; do
+    dpkg-query -W -f='${Status}' "$package" 2>/dev/null | grep -q "install ok installed" ||
+      missing+=("$package")
+  done
+  [ ${#missing[@]} -eq 0 ] && return
+  echo "== installing ${#missing[@]} Debian packages"
+  apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+}
+
+build() {
+  echo "== building in $workspace"
+  mkdir -p "$workspace/src"
+  ln -sfn "$repository" "$workspace/src/range_image_mapping"
+  if ! (cd "$workspace" && catkin_make -DPYTHON_EXECUTABLE=/usr/bin/python3 \
+    -DCMAKE_BUILD_TYPE=Release -j2 >"$workspace/build.log" 2>&1); then
+    tail -n 60 "$workspace/build.log"
+    echo "build failed; the whole log is $workspace/build.log" >&2
+    exit 1
+  fi
+}
+
+ros_environment() {
+  set +u
+  # shellcheck disable=SC1091
+  source "$workspace/devel/setup.bash"
+  set -u
+}
+
+demo() {
+  ros_environment
+  local capture="$RIM_DATA_DIR/ouster-pcaps/OS-1-128_v2.3.0_1024x10_lb_n3.pcap"
+  local metadata="$RIM_DATA_DIR/ouster-pcaps/OS-1-128_v2.3.0_1024x10.json"
+  if [ ! -f "$capture" ]; then
+    echo "The demo decodes a real Ouster capture, $capture, which is not on this machine." >&2
+    exit 1
+  fi
+  rosrun range_image_mapping rim decode "$capture" --metadata "$metadata" --out "$repository/out/decode"
+}
+
+run_tests() {
+  ros_environment
+  # One runner for everything: gtests, rostests and the fuzzer runs are ctest tests.
+  echo "== tests"
+  cd "$workspace/build" && ctest --output-on-failure
+}
+
+install_dependencies
+build
+if [ "$mode" = demo ]; then demo; else run_tests; fi
