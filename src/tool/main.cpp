@@ -10,6 +10,9 @@ int main(int argc, char** argv) {
   range_image_mapping::tool::addDecodeCommand(app);
   try {
     app.parse(argc, argv);
+  } catch (const CLI::RuntimeError& error) {  // a command that ran and failed
+    std::cerr << "rim: " << error.what() << "\n";
+    return error.get_exit_code();
   } catch (const CLI::ParseError& error) {
     return app.exit(error);
   } catch (const std::exception& error) {
