@@ -18,7 +18,7 @@ export PATH="/usr/bin:/bin:/usr/sbin:/sbin:$PATH"
 packages=(
   build-essential cmake pkg-config git
   catkin ros-core-dev python3-roslaunch python3-rostest python3-rosbag
-  libnodeletlib-dev libnodelet-dev pluginlib-dev libtopic-tools-dev
+  libnodeletlib-dev libnodeletlib-tools libnodelet-dev pluginlib-dev libtopic-tools-dev
   libtf2-ros-dev libtf2-eigen-dev libsensor-msgs-dev libnav-msgs-dev libvisualization-msgs-dev
   librostest-dev libgtest-dev libbenchmark-dev
   libeigen3-dev libtbb-dev libjsoncpp-dev libpcap-dev libcli11-dev libpng-dev libssl-dev

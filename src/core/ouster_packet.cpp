@@ -42,27 +42,21 @@ struct ScanFields {
 
 // One struct per pixel layout, so the profile is chosen once per packet and the
 // per-pixel loop has no branch on it.
-struct LegacyPixel {
-  static constexpr bool kLegacy = true;
+// LEGACY and RNG19_RFL8_SIG16_NIR16 share a 12-byte pixel and differ in the
+// width of the range field (20 and 19 bits) and in the packet header.
+template <bool Legacy, uint32_t RangeMask>
+struct TwelveBytePixel {
+  static constexpr bool kLegacy = Legacy;
   static constexpr std::size_t kBytes = 12;
   static void decode(const uint8_t* pixel, const ScanFields& fields, std::size_t i) {
-    fields.range[i] = readLittleEndian<uint32_t>(pixel) & 0xFFFFFu;
+    fields.range[i] = readLittleEndian<uint32_t>(pixel) & RangeMask;
     fields.reflectivity[i] = pixel[4];
     fields.signal[i] = readLittleEndian<uint16_t>(pixel + 6);
     fields.near_ir[i] = readLittleEndian<uint16_t>(pixel + 8);
   }
 };
-
-struct Rng19Rfl8Sig16Nir16Pixel {
-  static constexpr bool kLegacy = false;
-  static constexpr std::size_t kBytes = 12;
-  static void decode(const uint8_t* pixel, const ScanFields& fields, std::size_t i) {
-    fields.range[i] = readLittleEndian<uint32_t>(pixel) & 0x7FFFFu;
-    fields.reflectivity[i] = pixel[4];
-    fields.signal[i] = readLittleEndian<uint16_t>(pixel + 6);
-    fields.near_ir[i] = readLittleEndian<uint16_t>(pixel + 8);
-  }
-};
+using LegacyPixel = TwelveBytePixel<true, 0xFFFFFu>;
+using Rng19Rfl8Sig16Nir16Pixel = TwelveBytePixel<false, 0x7FFFFu>;
 
 struct Rng19Rfl8Sig16Nir16DualPixel {
   static constexpr bool kLegacy = false;

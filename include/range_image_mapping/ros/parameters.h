@@ -1,0 +1,79 @@
+// The one place where the nodelets read and validate their ROS parameters.
+// Every parameter has a default; a value of the wrong type or out of range is
+// an error naming the parameter, never silently replaced by the default.
+#pragma once
+
+#include "range_image_mapping/ouster_packet.h"
+
+#include <ros/node_handle.h>
+
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace range_image_mapping {
+
+class ParameterError : public std::invalid_argument {
+ public:
+  using std::invalid_argument::invalid_argument;
+};
+
+// Typed getters on one node handle (usually the nodelet's private one).
+class ParameterReader {
+ public:
+  explicit ParameterReader(const ros::NodeHandle& node) : node_(node) {}
+
+  std::string getString(const std::string& name, const std::string& default_value) const;
+  // One of choices, compared exactly.
+  std::string getChoice(const std::string& name, const std::string& default_value,
+                        const std::vector<std::string>& choices) const;
+  bool getBool(const std::string& name, bool default_value) const;
+  int getInt(const std::string& name, int default_value, int minimum, int maximum) const;
+  // Accepts integers too (YAML "10" for 10.0).
+  double getDouble(const std::string& name, double default_value, double minimum,
+                   double maximum) const;
+
+ private:
+  std::string fullName(const std::string& name) const;
+  ros::NodeHandle node_;
+};
+
+// ------------------------------------------------------------ Adapter nodelet
+
+enum class AdapterInput { kOusterPackets, kPointCloud };
+// Where the intrinsics of a PointCloud2 input come from.
+enum class CloudIntrinsicsSource { kSynthetic, kRing, kOuster };
+// What the header stamp of a range image from Ouster packets is.
+enum class StampSource { kReceiveTime, kSensorClock };
+
+struct AdapterParameters {
+  AdapterInput input = AdapterInput::kOusterPackets;
+  std::string metadata_file;  // Ouster metadata JSON; wins over the metadata topic
+  std::string lidar_frame = "os_lidar";
+  std::string sensor_frame = "os_sensor";
+  bool publish_static_tf = false;
+  bool publish_cloud = false;
+  // Ouster packets.
+  ReturnIndex ouster_return = ReturnIndex::kFirst;
+  StampSource stamp_source = StampSource::kReceiveTime;
+  double flush_after_idle_s = 0.5;  // publish the revolution in progress when packets stop
+  int packet_queue_size = 2048;
+  int pending_packet_limit = 4096;  // packets kept while waiting for metadata
+  // PointCloud2.
+  CloudIntrinsicsSource cloud_intrinsics = CloudIntrinsicsSource::kSynthetic;
+  int rows = 64;
+  int columns = 2048;
+  double fov_up_deg = 3.0;  // KITTI's HDL-64E, as io::kittiHdl64Intrinsics
+  double fov_down_deg = -25.0;
+  // Column order of organized clouds of the model's size (the Ouster driver's are destaggered).
+  ColumnOrder organized_column_order = ColumnOrder::kDestaggered;
+  int cloud_queue_size = 2;
+  // Logging.
+  double statistics_period_s = 10.0;  // period of the dropped-data summaries
+};
+
+// Reads every Adapter parameter from the nodelet's private node handle.
+// Throws ParameterError naming the first bad parameter.
+AdapterParameters readAdapterParameters(const ros::NodeHandle& private_node);
+
+}  // namespace range_image_mapping

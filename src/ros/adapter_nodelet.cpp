@@ -1,0 +1,540 @@
+// Adapter: Ouster packets or PointCloud2 in, self-describing LidarRangeImage out.
+//
+// Every callback runs on the nodelet's single-threaded queue (getNodeHandle),
+// so the members need no locks. Nothing thrown by bad input leaves a callback:
+// it is counted, logged (throttled) and the next message is processed.
+#include "range_image_mapping/LidarRangeImage.h"
+#include "range_image_mapping/ouster_metadata.h"
+#include "range_image_mapping/ouster_packet.h"
+#include "range_image_mapping/point_cloud_projection.h"
+#include "range_image_mapping/ros/parameters.h"
+#include "range_image_mapping/ros/range_image_conversions.h"
+#include "range_image_mapping/scan_batcher.h"
+
+#include <geometry_msgs/TransformStamped.h>
+#include <nodelet/nodelet.h>
+#include <pluginlib/class_list_macros.hpp>
+#include <ros/ros.h>
+#include <sensor_msgs/PointCloud2.h>
+#include <std_msgs/String.h>
+#include <tf2_ros/static_transform_broadcaster.h>
+#include <topic_tools/shape_shifter.h>
+
+#include <boost/make_shared.hpp>
+
+#include <Eigen/Geometry>
+
+#include <deque>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace range_image_mapping {
+namespace {
+
+// Drops the adapter saw itself, on top of the batcher's and the projection's.
+struct AdapterDrops {
+  std::size_t foreign_packet_messages = 0;  // not an Ouster PacketMsg, or a bad length prefix
+  std::size_t packets_without_metadata = 0;  // pending queue full before metadata arrived
+  std::size_t rejected_clouds = 0;           // PointCloud2 that could not be converted
+  std::size_t failed_scans = 0;              // a scan that could not become an image
+
+  std::size_t total() const {
+    return foreign_packet_messages + packets_without_metadata + rejected_clouds + failed_scans;
+  }
+};
+
+// Lets one message through per period, timed by the steady clock: the ROS
+// *_THROTTLE macros use ROS time, which stands still in a paused replay or
+// before a bag's clock starts, and then never log at all.
+class SteadyThrottle {
+ public:
+  bool allow(double period_s) {
+    const ros::SteadyTime now = ros::SteadyTime::now();
+    if (!last_.isZero() && (now - last_).toSec() < period_s) return false;
+    last_ = now;
+    return true;
+  }
+
+ private:
+  ros::SteadyTime last_;
+};
+
+void accumulate(BatcherStatistics& total, const BatcherStatistics& part) {
+  total.packets += part.packets;
+  total.wrong_size += part.wrong_size;
+  total.malformed += part.malformed;
+  total.stale += part.stale;
+  total.scans += part.scans;
+  total.incomplete_scans += part.incomplete_scans;
+  total.missing_columns += part.missing_columns;
+}
+
+void accumulate(ProjectionStatistics& total, const ProjectionStatistics& part) {
+  total.input_points += part.input_points;
+  total.non_finite += part.non_finite;
+  total.no_return += part.no_return;
+  total.outside_model += part.outside_model;
+  total.occluded += part.occluded;
+  total.kept += part.kept;
+}
+
+}  // namespace
+
+class AdapterNodelet : public nodelet::Nodelet {
+ public:
+  void onInit() override;
+
+ private:
+  // Ouster packets.
+  void startOusterInput();
+  void onPacketMessage(const topic_tools::ShapeShifter::ConstPtr& message);
+  void onMetadataMessage(const std_msgs::String::ConstPtr& message);
+  void useMetadata(const OusterMetadata& metadata, const std::string& origin);
+  void feedPacket(const uint8_t* data, std::size_t size, const ros::Time& receipt);
+  void onScan(const LidarScan& scan);
+  void onIdleCheck(const ros::SteadyTimerEvent&);
+  std::unique_ptr<ScanBatcher> makeBatcher(const OusterMetadata& metadata);
+  void replaceBatcher(std::unique_ptr<ScanBatcher> fresh);
+
+  // PointCloud2.
+  void startPointCloudInput();
+  void onPointCloud(const sensor_msgs::PointCloud2::ConstPtr& message);
+  void transformSensorFrameToLidarFrame(PointCloudInput& cloud) const;
+
+  void publish(const RangeImage& image, const std_msgs::Header& header);
+  void publishStaticTransform(const LidarIntrinsics& intrinsics);
+  void onStatisticsTimer(const ros::SteadyTimerEvent&);
+  BatcherStatistics batcherStatistics() const;
+
+  AdapterParameters parameters_;
+  ros::Publisher range_image_publisher_;
+  ros::Publisher cloud_publisher_;
+  std::unique_ptr<tf2_ros::StaticTransformBroadcaster> static_transform_broadcaster_;
+  ros::Subscriber input_subscriber_;
+  ros::Subscriber metadata_subscriber_;
+  ros::SteadyTimer idle_timer_;
+  ros::SteadyTimer statistics_timer_;
+
+  // Ouster state: one model and batcher per metadata.
+  std::optional<OusterMetadata> metadata_;
+  bool metadata_from_file_ = false;
+  LidarModelConstPtr model_;
+  std::unique_ptr<ScanBatcher> batcher_;
+  std::vector<uint8_t> serialized_packet_;  // reused per packet
+  // Packets that arrived before the metadata (a latched topic may connect late).
+  struct PendingPacket {
+    std::vector<uint8_t> bytes;
+    ros::Time receipt;
+  };
+  std::deque<PendingPacket> pending_packets_;
+  // A looping bag replays frame ids the batcher has already emitted, which it
+  // refuses as stale. When ROS time goes back, the next stale packet within a
+  // revolution's worth of packets starts a new scan sequence, fed with the
+  // stale packets just before it: /clock ticks slower than packets arrive, so
+  // the jump shows a few packets late, and packets of the old pass still
+  // queued after the jump complete the old scan rather than cut it short.
+  std::deque<PendingPacket> stale_packets_;
+  static constexpr std::size_t kStalePacketLimit = 512;
+  int time_jump_packets_left_ = 0;
+  // Receipt time of the first packet of the current and the previous frame: a
+  // scan is emitted on its last column, on the next frame's first packet, or on
+  // flush, so it is one of these two.
+  uint32_t current_frame_id_ = 0, previous_frame_id_ = 0;
+  ros::Time current_frame_receipt_, previous_frame_receipt_;
+  bool revolution_in_progress_ = false;
+  ros::SteadyTime last_packet_time_;
+  ros::Time last_receipt_;  // to notice ROS time jumping back (a bag loop)
+
+  // PointCloud2 state.
+  PointCloudInput cloud_input_;  // reused per cloud
+  LidarModelConstPtr cloud_model_;
+  std::vector<int> ring_to_row_;  // intrinsics: ring only
+
+  // Counters for the throttled summaries.
+  BatcherStatistics retired_batcher_statistics_;  // of batchers replaced by new metadata
+  ProjectionStatistics projection_statistics_;
+  AdapterDrops drops_;
+  BatcherStatistics logged_batcher_statistics_;
+  ProjectionStatistics logged_projection_statistics_;
+  AdapterDrops logged_drops_;
+  SteadyThrottle foreign_packet_log_, no_metadata_log_, packet_error_log_, scan_error_log_,
+      flush_error_log_, cloud_error_log_;
+};
+
+void AdapterNodelet::onInit() {
+  ros::NodeHandle& node = getNodeHandle();
+  try {
+    parameters_ = readAdapterParameters(getPrivateNodeHandle());
+  } catch (const std::exception& error) {
+    NODELET_ERROR("Adapter not started: %s", error.what());
+    return;
+  }
+  range_image_publisher_ = node.advertise<LidarRangeImage>("range_image", 4);
+  if (parameters_.publish_cloud) cloud_publisher_ = node.advertise<sensor_msgs::PointCloud2>("cloud", 4);
+  if (parameters_.publish_static_tf)
+    static_transform_broadcaster_ = std::make_unique<tf2_ros::StaticTransformBroadcaster>();
+  statistics_timer_ = node.createSteadyTimer(ros::WallDuration(parameters_.statistics_period_s),
+                                             &AdapterNodelet::onStatisticsTimer, this);
+  if (parameters_.input == AdapterInput::kOusterPackets)
+    startOusterInput();
+  else
+    startPointCloudInput();
+}
+
+// ------------------------------------------------------------ Ouster packets
+
+void AdapterNodelet::startOusterInput() {
+  ros::NodeHandle& node = getNodeHandle();
+  if (!parameters_.metadata_file.empty()) {
+    try {
+      useMetadata(loadOusterMetadata(parameters_.metadata_file), "file " + parameters_.metadata_file);
+      metadata_from_file_ = true;
+    } catch (const std::exception& error) {
+      NODELET_ERROR("metadata_file %s unusable, waiting for the metadata topic instead: %s",
+                    parameters_.metadata_file.c_str(), error.what());
+    }
+  }
+  metadata_subscriber_ =
+      node.subscribe("metadata", 1, &AdapterNodelet::onMetadataMessage, this);
+  input_subscriber_ = node.subscribe("lidar_packets", parameters_.packet_queue_size,
+                                     &AdapterNodelet::onPacketMessage, this);
+  if (parameters_.flush_after_idle_s > 0)
+    idle_timer_ = node.createSteadyTimer(ros::WallDuration(parameters_.flush_after_idle_s / 2),
+                                         &AdapterNodelet::onIdleCheck, this);
+  NODELET_INFO("Adapter: Ouster packets from %s, metadata from %s, range images on %s",
+               input_subscriber_.getTopic().c_str(),
+               metadata_from_file_ ? parameters_.metadata_file.c_str()
+                                   : metadata_subscriber_.getTopic().c_str(),
+               range_image_publisher_.getTopic().c_str());
+}
+
+void AdapterNodelet::onMetadataMessage(const std_msgs::String::ConstPtr& message) {
+  try {
+    if (metadata_from_file_) {
+      NODELET_INFO_ONCE("metadata topic ignored: metadata_file %s is set",
+                        parameters_.metadata_file.c_str());
+      return;
+    }
+    if (metadata_ && metadata_->json == message->data) return;  // latched re-delivery
+    OusterMetadata metadata;
+    try {
+      metadata = parseOusterMetadata(message->data);
+    } catch (const MetadataError& error) {
+      NODELET_ERROR("metadata on %s rejected%s: %s", metadata_subscriber_.getTopic().c_str(),
+                    metadata_ ? ", keeping the previous one" : "", error.what());
+      return;
+    }
+    useMetadata(metadata, "topic " + metadata_subscriber_.getTopic());
+  } catch (const std::exception& error) {
+    NODELET_ERROR("metadata on %s not used: %s", metadata_subscriber_.getTopic().c_str(), error.what());
+  }
+}
+
+// Builds the model and batcher of metadata first, so metadata the core
+// rejects leaves the previous ones in place; then hands over.
+void AdapterNodelet::useMetadata(const OusterMetadata& metadata, const std::string& origin) {
+  auto model = std::make_shared<const LidarModel>(metadata.intrinsics);
+  auto batcher = makeBatcher(metadata);
+  if (parameters_.ouster_return == ReturnIndex::kSecond &&
+      metadata.profile != UdpProfile::kRng19Rfl8Sig16Nir16Dual)
+    NODELET_WARN("ouster_return is second but profile %s has one return: the images will be empty",
+                 toString(metadata.profile));
+
+  // The revolution in progress belongs to the old metadata: it is flushed
+  // with the old model before the new one takes over.
+  replaceBatcher(std::move(batcher));
+  model_ = std::move(model);
+  metadata_ = metadata;
+  NODELET_INFO("Ouster metadata from %s: %s %s, %s, %s, %dx%d", origin.c_str(),
+               metadata.prod_line.c_str(), metadata.serial.c_str(), metadata.firmware.c_str(),
+               toString(metadata.profile), model_->rows(), model_->columns());
+  publishStaticTransform(model_->intrinsics());
+
+  while (!pending_packets_.empty()) {
+    const PendingPacket& packet = pending_packets_.front();
+    feedPacket(packet.bytes.data(), packet.bytes.size(), packet.receipt);
+    pending_packets_.pop_front();
+  }
+}
+
+std::unique_ptr<ScanBatcher> AdapterNodelet::makeBatcher(const OusterMetadata& metadata) {
+  return std::make_unique<ScanBatcher>(metadata, [this](const LidarScan& scan) { onScan(scan); });
+}
+
+// Publishes what the old batcher holds, keeps its counts, and hands over.
+void AdapterNodelet::replaceBatcher(std::unique_ptr<ScanBatcher> fresh) {
+  if (batcher_) {
+    batcher_->flush();
+    accumulate(retired_batcher_statistics_, batcher_->statistics());
+  }
+  batcher_ = std::move(fresh);
+  revolution_in_progress_ = false;
+  current_frame_receipt_ = previous_frame_receipt_ = ros::Time();
+}
+
+void AdapterNodelet::onPacketMessage(const topic_tools::ShapeShifter::ConstPtr& message) {
+  try {
+    const ros::Time receipt = ros::Time::now();
+    last_packet_time_ = ros::SteadyTime::now();
+    if (batcher_ && !last_receipt_.isZero() && receipt < last_receipt_) {
+      NODELET_WARN("ROS time jumped back by %.3f s (bag loop or restart)", (last_receipt_ - receipt).toSec());
+      const PacketFormat& format = batcher_->format();
+      time_jump_packets_left_ = format.columns() / format.columnsPerPacket() + 1;
+    }
+    last_receipt_ = receipt;
+    PacketBytes packet;
+    try {
+      packet = ousterPacketBytes(*message, serialized_packet_);
+    } catch (const MessageConversionError& error) {
+      ++drops_.foreign_packet_messages;
+      if (foreign_packet_log_.allow(parameters_.statistics_period_s))
+        NODELET_ERROR("dropped on %s: %s", input_subscriber_.getTopic().c_str(), error.what());
+      return;
+    }
+    if (!batcher_) {
+      // Keep the newest packets: the oldest belong to a revolution that will be incomplete anyway.
+      const bool full = static_cast<int>(pending_packets_.size()) >= parameters_.pending_packet_limit;
+      if (full) {
+        ++drops_.packets_without_metadata;
+        if (no_metadata_log_.allow(parameters_.statistics_period_s))
+          NODELET_WARN("no Ouster metadata yet (topic %s or parameter metadata_file): dropping "
+                       "packets, %zu so far",
+                       metadata_subscriber_.getTopic().c_str(), drops_.packets_without_metadata);
+        if (pending_packets_.empty()) return;  // pending_packet_limit 0: keep nothing
+        pending_packets_.pop_front();
+      }
+      pending_packets_.push_back({std::vector<uint8_t>(packet.data, packet.data + packet.size), receipt});
+      return;
+    }
+    feedPacket(packet.data, packet.size, receipt);
+  } catch (const std::exception& error) {
+    if (packet_error_log_.allow(parameters_.statistics_period_s))
+      NODELET_ERROR("packet on %s dropped: %s", input_subscriber_.getTopic().c_str(), error.what());
+  }
+}
+
+void AdapterNodelet::feedPacket(const uint8_t* data, std::size_t size, const ros::Time& receipt) {
+  const PacketFormat& format = batcher_->format();
+  if (size == format.packetSize()) {
+    const uint32_t frame_id = format.frameId(data);
+    if (frame_id != current_frame_id_ || current_frame_receipt_.isZero()) {
+      previous_frame_id_ = current_frame_id_;
+      previous_frame_receipt_ = current_frame_receipt_;
+      current_frame_id_ = frame_id;
+      current_frame_receipt_ = receipt;
+    }
+  }
+  revolution_in_progress_ = true;
+  const std::size_t stale_before = batcher_->statistics().stale;
+  batcher_->addPacket(data, size);  // may call onScan
+  if (batcher_->statistics().stale == stale_before) {
+    stale_packets_.clear();
+    if (time_jump_packets_left_ > 0) --time_jump_packets_left_;
+    return;
+  }
+  if (stale_packets_.size() < kStalePacketLimit)
+    stale_packets_.push_back({std::vector<uint8_t>(data, data + size), receipt});
+  if (time_jump_packets_left_ > 0) {
+    time_jump_packets_left_ = 0;
+    NODELET_WARN("frame ids repeat after ROS time went back: starting a new scan sequence");
+    replaceBatcher(makeBatcher(*metadata_));
+    std::deque<PendingPacket> start_of_pass;
+    start_of_pass.swap(stale_packets_);
+    for (const PendingPacket& early : start_of_pass)
+      feedPacket(early.bytes.data(), early.bytes.size(), early.receipt);
+  }
+}
+
+void AdapterNodelet::onScan(const LidarScan& scan) {
+  revolution_in_progress_ = false;
+  try {
+    if (range_image_publisher_.getNumSubscribers() == 0 &&
+        (!cloud_publisher_ || cloud_publisher_.getNumSubscribers() == 0))
+      return;
+    const RangeImage image = toRangeImage(scan, model_, parameters_.ouster_return);
+    std_msgs::Header header;
+    header.frame_id = parameters_.lidar_frame;
+    if (parameters_.stamp_source == StampSource::kSensorClock)
+      header.stamp.fromNSec(image.stamp_ns);
+    else
+      header.stamp = scan.frame_id == current_frame_id_ && !current_frame_receipt_.isZero()
+                         ? current_frame_receipt_
+                     : scan.frame_id == previous_frame_id_ && !previous_frame_receipt_.isZero()
+                         ? previous_frame_receipt_
+                         : ros::Time::now();
+    publish(image, header);
+  } catch (const std::exception& error) {
+    ++drops_.failed_scans;
+    if (scan_error_log_.allow(parameters_.statistics_period_s))
+      NODELET_ERROR("scan %u dropped: %s", scan.frame_id, error.what());
+  }
+}
+
+// A replay that ends, or a sensor that stops, leaves its last revolution in the
+// batcher: publish it once packets have stopped for flush_after_idle.
+void AdapterNodelet::onIdleCheck(const ros::SteadyTimerEvent&) {
+  try {
+    if (!batcher_ || !revolution_in_progress_) return;
+    if ((ros::SteadyTime::now() - last_packet_time_).toSec() < parameters_.flush_after_idle_s) return;
+    revolution_in_progress_ = false;
+    batcher_->flush();
+  } catch (const std::exception& error) {
+    if (flush_error_log_.allow(parameters_.statistics_period_s))
+      NODELET_ERROR("flush failed: %s", error.what());
+  }
+}
+
+// ------------------------------------------------------------ PointCloud2
+
+void AdapterNodelet::startPointCloudInput() {
+  try {
+    switch (parameters_.cloud_intrinsics) {
+      case CloudIntrinsicsSource::kSynthetic:
+        cloud_model_ = std::make_shared<const LidarModel>(LidarIntrinsics::synthetic(
+            parameters_.rows, parameters_.columns, parameters_.fov_up_deg * M_PI / 180.0,
+            parameters_.fov_down_deg * M_PI / 180.0));
+        break;
+      case CloudIntrinsicsSource::kOuster:
+        cloud_model_ =
+            std::make_shared<const LidarModel>(loadOusterMetadata(parameters_.metadata_file).intrinsics);
+        publishStaticTransform(cloud_model_->intrinsics());
+        break;
+      case CloudIntrinsicsSource::kRing:
+        break;  // from the first cloud that has every ring
+    }
+  } catch (const std::exception& error) {
+    NODELET_ERROR("Adapter not started: intrinsics %s: %s",
+                  parameters_.cloud_intrinsics == CloudIntrinsicsSource::kOuster
+                      ? ("from metadata_file " + parameters_.metadata_file).c_str()
+                      : "from parameters",
+                  error.what());
+    return;
+  }
+  input_subscriber_ = getNodeHandle().subscribe("points", parameters_.cloud_queue_size,
+                                                &AdapterNodelet::onPointCloud, this);
+  NODELET_INFO("Adapter: PointCloud2 from %s, range images on %s", input_subscriber_.getTopic().c_str(),
+               range_image_publisher_.getTopic().c_str());
+}
+
+// The Ouster driver publishes its clouds in the sensor frame; the model's
+// geometry is in the lidar frame.
+void AdapterNodelet::transformSensorFrameToLidarFrame(PointCloudInput& cloud) const {
+  const Eigen::Isometry3f sensor_to_lidar = cloud_model_->intrinsics().lidar_to_sensor.inverse().cast<float>();
+  for (Eigen::Vector3f& point : cloud.points) point = sensor_to_lidar * point;
+}
+
+void AdapterNodelet::onPointCloud(const sensor_msgs::PointCloud2::ConstPtr& message) {
+  try {
+    fromPointCloud2(*message, cloud_input_);
+    cloud_input_.organized_column_order = parameters_.organized_column_order;
+    std_msgs::Header header = message->header;
+    if (header.frame_id.empty()) header.frame_id = parameters_.lidar_frame;
+    if (parameters_.cloud_intrinsics == CloudIntrinsicsSource::kOuster &&
+        header.frame_id == parameters_.sensor_frame) {
+      transformSensorFrameToLidarFrame(cloud_input_);
+      header.frame_id = parameters_.lidar_frame;
+    }
+    if (!cloud_model_) {
+      RingIntrinsics ring_intrinsics = intrinsicsFromRings(cloud_input_, parameters_.columns);
+      cloud_model_ = std::make_shared<const LidarModel>(std::move(ring_intrinsics.intrinsics));
+      ring_to_row_ = std::move(ring_intrinsics.ring_to_row);
+      NODELET_INFO("ring intrinsics from the cloud on %s: %d rings x %d columns",
+                   input_subscriber_.getTopic().c_str(), cloud_model_->rows(), cloud_model_->columns());
+    }
+    ProjectionStatistics statistics;
+    const RangeImage image = ring_to_row_.empty()
+                                 ? projectPointCloud(cloud_input_, cloud_model_, &statistics)
+                                 : projectPointCloud(cloud_input_, cloud_model_, ring_to_row_, &statistics);
+    accumulate(projection_statistics_, statistics);
+    publish(image, header);
+  } catch (const std::exception& error) {
+    ++drops_.rejected_clouds;
+    if (cloud_error_log_.allow(parameters_.statistics_period_s))
+      NODELET_ERROR("PointCloud2 on %s dropped: %s", input_subscriber_.getTopic().c_str(), error.what());
+  }
+}
+
+// ------------------------------------------------------------ output
+
+void AdapterNodelet::publish(const RangeImage& image, const std_msgs::Header& header) {
+  if (range_image_publisher_.getNumSubscribers() > 0) {
+    // Allocated here, published once and never touched again, so subscribers
+    // in the same manager share it without a copy.
+    const auto message = boost::make_shared<LidarRangeImage>();
+    toMessage(image, header, *message);
+    range_image_publisher_.publish(boost::shared_ptr<const LidarRangeImage>(message));
+  }
+  if (cloud_publisher_ && cloud_publisher_.getNumSubscribers() > 0) {
+    const auto cloud = boost::make_shared<sensor_msgs::PointCloud2>();
+    toPointCloud2(image, header, *cloud);
+    cloud_publisher_.publish(boost::shared_ptr<const sensor_msgs::PointCloud2>(cloud));
+  }
+}
+
+// The transform sensor_frame -> lidar_frame that the driver would publish;
+// replays of raw packets do not carry it.
+void AdapterNodelet::publishStaticTransform(const LidarIntrinsics& intrinsics) {
+  if (!static_transform_broadcaster_) return;
+  const Eigen::Isometry3d& lidar_to_sensor = intrinsics.lidar_to_sensor;
+  const Eigen::Quaterniond rotation(lidar_to_sensor.rotation());
+  geometry_msgs::TransformStamped transform;
+  transform.header.stamp = ros::Time::now();
+  transform.header.frame_id = parameters_.sensor_frame;
+  transform.child_frame_id = parameters_.lidar_frame;
+  transform.transform.translation.x = lidar_to_sensor.translation().x();
+  transform.transform.translation.y = lidar_to_sensor.translation().y();
+  transform.transform.translation.z = lidar_to_sensor.translation().z();
+  transform.transform.rotation.x = rotation.x();
+  transform.transform.rotation.y = rotation.y();
+  transform.transform.rotation.z = rotation.z();
+  transform.transform.rotation.w = rotation.w();
+  static_transform_broadcaster_->sendTransform(transform);
+}
+
+BatcherStatistics AdapterNodelet::batcherStatistics() const {
+  BatcherStatistics total = retired_batcher_statistics_;
+  if (batcher_) accumulate(total, batcher_->statistics());
+  return total;
+}
+
+// One line per period while anything is being dropped, with the counts of the period.
+void AdapterNodelet::onStatisticsTimer(const ros::SteadyTimerEvent&) {
+  const BatcherStatistics batcher = batcherStatistics();
+  const BatcherStatistics& before = logged_batcher_statistics_;
+  const std::size_t packet_drops = (batcher.wrong_size - before.wrong_size) +
+                                   (batcher.malformed - before.malformed) + (batcher.stale - before.stale);
+  const std::size_t incomplete = batcher.incomplete_scans - before.incomplete_scans;
+  const ProjectionStatistics& projected = projection_statistics_;
+  const ProjectionStatistics& projected_before = logged_projection_statistics_;
+  const std::size_t point_drops = (projected.non_finite - projected_before.non_finite) +
+                                  (projected.no_return - projected_before.no_return) +
+                                  (projected.outside_model - projected_before.outside_model);
+  const std::size_t other_drops = drops_.total() - logged_drops_.total();
+  if (packet_drops + incomplete + point_drops + other_drops > 0) {
+    NODELET_WARN(
+        "last %.0f s: packets dropped %zu (wrong size %zu, malformed %zu, stale %zu, "
+        "not Ouster packets %zu, no metadata %zu); incomplete scans %zu (%zu columns missing); "
+        "points dropped %zu (non-finite %zu, at the origin %zu, outside the model %zu); "
+        "clouds rejected %zu; "
+        "scans failed %zu",
+        parameters_.statistics_period_s, packet_drops, batcher.wrong_size - before.wrong_size,
+        batcher.malformed - before.malformed, batcher.stale - before.stale,
+        drops_.foreign_packet_messages - logged_drops_.foreign_packet_messages,
+        drops_.packets_without_metadata - logged_drops_.packets_without_metadata, incomplete,
+        batcher.missing_columns - before.missing_columns, point_drops,
+        projected.non_finite - projected_before.non_finite,
+        projected.no_return - projected_before.no_return,
+        projected.outside_model - projected_before.outside_model,
+        drops_.rejected_clouds - logged_drops_.rejected_clouds,
+        drops_.failed_scans - logged_drops_.failed_scans);
+  }
+  logged_batcher_statistics_ = batcher;
+  logged_projection_statistics_ = projection_statistics_;
+  logged_drops_ = drops_;
+}
+
+}  // namespace range_image_mapping
+
+PLUGINLIB_EXPORT_CLASS(range_image_mapping::AdapterNodelet, nodelet::Nodelet)

@@ -1,0 +1,361 @@
+#include "range_image_mapping/ros/range_image_conversions.h"
+
+#include <sensor_msgs/PointField.h>
+
+#include <cstring>
+#include <limits>
+#include <string>
+
+namespace range_image_mapping {
+namespace {
+
+[[noreturn]] void fail(const std::string& what) { throw MessageConversionError(what); }
+
+// ------------------------------------------------------------ range image message
+
+template <typename Sequence>
+void requireSize(const Sequence& values, std::uint64_t expected, const std::string& name,
+                 const std::string& expected_name) {
+  if (values.size() != expected)
+    fail("LidarRangeImage: " + name + " has " + std::to_string(values.size()) + " values, " +
+         expected_name + " is " + std::to_string(expected));
+}
+
+// The message's pixel arrays and table sizes agree with height and width. Checked
+// before any table is built, so a bogus height*width cannot allocate a huge model.
+void checkMessageSizes(const LidarRangeImage& message) {
+  if (message.height == 0 || message.width == 0 ||
+      message.height > static_cast<uint32_t>(std::numeric_limits<int>::max()) ||
+      message.width > static_cast<uint32_t>(std::numeric_limits<int>::max()))
+    fail("LidarRangeImage: height and width must be positive, got " +
+         std::to_string(message.height) + "x" + std::to_string(message.width));
+  const std::uint64_t pixels = std::uint64_t(message.height) * message.width;
+  requireSize(message.range, pixels, "range", "height*width");
+  if (!message.intensity.empty()) requireSize(message.intensity, pixels, "intensity", "height*width");
+  if (!message.column_timestamps.empty())
+    requireSize(message.column_timestamps, message.width, "column_timestamps", "width");
+  requireSize(message.altitude, message.height, "altitude", "height");
+  requireSize(message.azimuth_offset, message.height, "azimuth_offset", "height");
+  if (!message.pixel_shift_by_row.empty())
+    requireSize(message.pixel_shift_by_row, message.height, "pixel_shift_by_row", "height");
+  if (message.column_order != LidarRangeImage::STAGGERED &&
+      message.column_order != LidarRangeImage::DESTAGGERED)
+    fail("LidarRangeImage: column_order must be STAGGERED (0) or DESTAGGERED (1), got " +
+         std::to_string(message.column_order));
+}
+
+Eigen::Matrix4d lidarToSensorMatrix(const LidarRangeImage& message) {
+  Eigen::Matrix4d matrix;
+  for (int i = 0; i < 16; ++i) matrix(i / 4, i % 4) = message.lidar_to_sensor[i];
+  return matrix;
+}
+
+// Field for field the comparison LidarModelCache needs, without building
+// intrinsics (no allocation per scan).
+bool sameTables(const LidarIntrinsics& tables, const LidarRangeImage& message) {
+  return tables.rows == static_cast<int>(message.height) &&
+         tables.columns == static_cast<int>(message.width) &&
+         tables.altitude_rad == message.altitude &&
+         tables.azimuth_offset_rad == message.azimuth_offset &&
+         tables.beam_origin_radius_m == message.beam_origin_radius &&
+         tables.beam_origin_z_m == message.beam_origin_z &&
+         tables.pixel_shift_by_row == message.pixel_shift_by_row &&
+         tables.lidar_to_sensor.matrix() == lidarToSensorMatrix(message) &&
+         tables.column_window[0] == message.column_window[0] &&
+         tables.column_window[1] == message.column_window[1] &&
+         tables.sensor_model == message.sensor_model;
+}
+
+// ------------------------------------------------------------ PointCloud2
+
+const char* datatypeName(uint8_t datatype) {
+  switch (datatype) {
+    case sensor_msgs::PointField::INT8: return "int8";
+    case sensor_msgs::PointField::UINT8: return "uint8";
+    case sensor_msgs::PointField::INT16: return "int16";
+    case sensor_msgs::PointField::UINT16: return "uint16";
+    case sensor_msgs::PointField::INT32: return "int32";
+    case sensor_msgs::PointField::UINT32: return "uint32";
+    case sensor_msgs::PointField::FLOAT32: return "float32";
+    case sensor_msgs::PointField::FLOAT64: return "float64";
+    default: return "unknown";
+  }
+}
+
+std::size_t datatypeSize(uint8_t datatype) {
+  switch (datatype) {
+    case sensor_msgs::PointField::INT8:
+    case sensor_msgs::PointField::UINT8: return 1;
+    case sensor_msgs::PointField::INT16:
+    case sensor_msgs::PointField::UINT16: return 2;
+    case sensor_msgs::PointField::INT32:
+    case sensor_msgs::PointField::UINT32:
+    case sensor_msgs::PointField::FLOAT32: return 4;
+    case sensor_msgs::PointField::FLOAT64: return 8;
+    default: return 0;
+  }
+}
+
+template <typename T>
+T readUnaligned(const uint8_t* bytes) {
+  T value;
+  std::memcpy(&value, bytes, sizeof(T));
+  return value;
+}
+
+// One field of a PointCloud2 point, read as double whatever its type (little endian).
+struct FieldReader {
+  const sensor_msgs::PointField* field = nullptr;
+
+  explicit operator bool() const { return field != nullptr; }
+  double read(const uint8_t* point) const {
+    const uint8_t* bytes = point + field->offset;
+    switch (field->datatype) {
+      case sensor_msgs::PointField::INT8: return readUnaligned<int8_t>(bytes);
+      case sensor_msgs::PointField::UINT8: return readUnaligned<uint8_t>(bytes);
+      case sensor_msgs::PointField::INT16: return readUnaligned<int16_t>(bytes);
+      case sensor_msgs::PointField::UINT16: return readUnaligned<uint16_t>(bytes);
+      case sensor_msgs::PointField::INT32: return readUnaligned<int32_t>(bytes);
+      case sensor_msgs::PointField::UINT32: return readUnaligned<uint32_t>(bytes);
+      case sensor_msgs::PointField::FLOAT32: return readUnaligned<float>(bytes);
+      default: return readUnaligned<double>(bytes);
+    }
+  }
+};
+
+// Finds a field and checks its type is one of allowed; an absent field is an
+// empty reader, a present one of another type an error naming both.
+FieldReader findField(const sensor_msgs::PointCloud2& cloud, const std::string& name,
+                      std::initializer_list<uint8_t> allowed, const std::string& allowed_names) {
+  for (const sensor_msgs::PointField& field : cloud.fields) {
+    if (field.name != name) continue;
+    bool type_ok = false;
+    for (const uint8_t datatype : allowed) type_ok |= field.datatype == datatype;
+    if (!type_ok)
+      fail("PointCloud2: field '" + name + "' has type " + datatypeName(field.datatype) + " (" +
+           std::to_string(field.datatype) + "), expected " + allowed_names);
+    if (field.count > 1)
+      fail("PointCloud2: field '" + name + "' has count " + std::to_string(field.count) +
+           ", expected 1");
+    if (std::uint64_t(field.offset) + datatypeSize(field.datatype) > cloud.point_step)
+      fail("PointCloud2: field '" + name + "' at offset " + std::to_string(field.offset) +
+           " does not fit in point_step " + std::to_string(cloud.point_step));
+    return FieldReader{&field};
+  }
+  return FieldReader{};
+}
+
+FieldReader requireField(const sensor_msgs::PointCloud2& cloud, const std::string& name,
+                         std::initializer_list<uint8_t> allowed, const std::string& allowed_names) {
+  FieldReader reader = findField(cloud, name, allowed, allowed_names);
+  if (!reader) fail("PointCloud2: required field '" + name + "' (" + allowed_names + ") is missing");
+  return reader;
+}
+
+void checkCloudSizes(const sensor_msgs::PointCloud2& cloud) {
+  if (cloud.is_bigendian) fail("PointCloud2: is_bigendian is set; big-endian clouds are not supported");
+  const std::uint64_t points = std::uint64_t(cloud.width) * cloud.height;
+  if (points == 0) return;
+  if (cloud.point_step == 0) fail("PointCloud2: point_step is 0");
+  if (std::uint64_t(cloud.point_step) * cloud.width > cloud.row_step)
+    fail("PointCloud2: row_step " + std::to_string(cloud.row_step) + " is smaller than width " +
+         std::to_string(cloud.width) + " * point_step " + std::to_string(cloud.point_step));
+  if (std::uint64_t(cloud.row_step) * cloud.height > cloud.data.size())
+    fail("PointCloud2: data has " + std::to_string(cloud.data.size()) + " bytes, height " +
+         std::to_string(cloud.height) + " * row_step " + std::to_string(cloud.row_step) +
+         " needs more");
+}
+
+}  // namespace
+
+// ------------------------------------------------------------ range image message
+
+LidarIntrinsics intrinsicsFromMessage(const LidarRangeImage& message) {
+  checkMessageSizes(message);
+  LidarIntrinsics intrinsics;
+  intrinsics.rows = static_cast<int>(message.height);
+  intrinsics.columns = static_cast<int>(message.width);
+  intrinsics.altitude_rad = message.altitude;
+  intrinsics.azimuth_offset_rad = message.azimuth_offset;
+  intrinsics.beam_origin_radius_m = message.beam_origin_radius;
+  intrinsics.beam_origin_z_m = message.beam_origin_z;
+  intrinsics.pixel_shift_by_row.assign(message.pixel_shift_by_row.begin(),
+                                       message.pixel_shift_by_row.end());
+  intrinsics.lidar_to_sensor.matrix() = lidarToSensorMatrix(message);
+  intrinsics.column_window = {message.column_window[0], message.column_window[1]};
+  intrinsics.sensor_model = message.sensor_model;
+  intrinsics.validate();
+  return intrinsics;
+}
+
+const LidarModelConstPtr& LidarModelCache::modelFor(const LidarRangeImage& message) {
+  if (model_ && sameTables(tables_, message)) return model_;
+  LidarIntrinsics tables = intrinsicsFromMessage(message);
+  model_ = std::make_shared<const LidarModel>(tables);  // may throw: then nothing changes
+  tables_ = std::move(tables);
+  return model_;
+}
+
+void toMessage(const RangeImage& image, const std_msgs::Header& header, LidarRangeImage& message) {
+  if (!image.model) fail("toMessage: the range image has no sensor model");
+  const LidarIntrinsics& intrinsics = image.model->intrinsics();
+  message.header = header;
+  message.height = static_cast<uint32_t>(image.rows());
+  message.width = static_cast<uint32_t>(image.columns());
+  message.column_order = image.column_order == ColumnOrder::kStaggered ? LidarRangeImage::STAGGERED
+                                                                         : LidarRangeImage::DESTAGGERED;
+  message.frame_id = image.frame_id;
+  message.range = image.range;
+  message.intensity = image.intensity;
+  message.intensity_field = image.intensity_field;
+  message.column_timestamps = image.column_timestamp_ns;
+
+  message.sensor_model = intrinsics.sensor_model;
+  message.altitude = intrinsics.altitude_rad;
+  message.azimuth_offset = intrinsics.azimuth_offset_rad;
+  message.beam_origin_radius = intrinsics.beam_origin_radius_m;
+  message.beam_origin_z = intrinsics.beam_origin_z_m;
+  message.pixel_shift_by_row.assign(intrinsics.pixel_shift_by_row.begin(),
+                                    intrinsics.pixel_shift_by_row.end());
+  const Eigen::Matrix4d& lidar_to_sensor = intrinsics.lidar_to_sensor.matrix();
+  for (int i = 0; i < 16; ++i) message.lidar_to_sensor[i] = lidar_to_sensor(i / 4, i % 4);
+  message.column_window[0] = intrinsics.column_window[0];
+  message.column_window[1] = intrinsics.column_window[1];
+}
+
+RangeImage fromMessage(const LidarRangeImage& message, LidarModelCache& models) {
+  RangeImage image;
+  image.model = models.modelFor(message);  // checks every size first
+  image.range = message.range;
+  image.intensity = message.intensity;
+  image.intensity_field = message.intensity_field;
+  image.column_timestamp_ns = message.column_timestamps;
+  if (image.column_timestamp_ns.empty()) image.column_timestamp_ns.assign(message.width, 0);
+  image.column_order = message.column_order == LidarRangeImage::STAGGERED ? ColumnOrder::kStaggered
+                                                                          : ColumnOrder::kDestaggered;
+  image.stamp_ns = message.header.stamp.toNSec();
+  image.frame_id = message.frame_id;
+  return image;
+}
+
+void toPointCloud2(const RangeImage& image, const std_msgs::Header& header,
+                   sensor_msgs::PointCloud2& cloud) {
+  if (!image.model) fail("toPointCloud2: the range image has no sensor model");
+  if (image.column_order != ColumnOrder::kStaggered) {
+    toPointCloud2(image.staggered(), header, cloud);
+    return;
+  }
+  const bool with_intensity = !image.intensity.empty();
+  const auto add_field = [&](const char* name, uint32_t offset, uint8_t datatype) {
+    sensor_msgs::PointField field;
+    field.name = name;
+    field.offset = offset;
+    field.datatype = datatype;
+    field.count = 1;
+    cloud.fields.push_back(field);
+  };
+  cloud.fields.clear();
+  add_field("x", 0, sensor_msgs::PointField::FLOAT32);
+  add_field("y", 4, sensor_msgs::PointField::FLOAT32);
+  add_field("z", 8, sensor_msgs::PointField::FLOAT32);
+  uint32_t ring_offset = 12;
+  if (with_intensity) {
+    add_field("intensity", 12, sensor_msgs::PointField::FLOAT32);
+    ring_offset = 16;
+  }
+  add_field("ring", ring_offset, sensor_msgs::PointField::UINT16);
+
+  const std::size_t points = image.validCount();
+  cloud.header = header;
+  cloud.height = 1;
+  cloud.width = static_cast<uint32_t>(points);
+  cloud.is_bigendian = false;
+  cloud.point_step = ring_offset + 4;  // ring plus padding keeps every point 4-byte aligned
+  cloud.row_step = cloud.point_step * cloud.width;
+  cloud.is_dense = true;
+  cloud.data.assign(cloud.row_step, 0);
+
+  uint8_t* out = cloud.data.data();
+  for (int v = 0; v < image.rows(); ++v) {
+    const uint16_t ring = static_cast<uint16_t>(v);
+    for (int u = 0; u < image.columns(); ++u) {
+      if (!image.valid(v, u)) continue;
+      const Eigen::Vector3f point = image.model->unproject(u, v, image.at(v, u));
+      std::memcpy(out, point.data(), 3 * sizeof(float));
+      if (with_intensity) std::memcpy(out + 12, &image.intensity[image.index(v, u)], sizeof(float));
+      std::memcpy(out + ring_offset, &ring, sizeof(ring));
+      out += cloud.point_step;
+    }
+  }
+}
+
+void fromPointCloud2(const sensor_msgs::PointCloud2& cloud, PointCloudInput& input) {
+  using sensor_msgs::PointField;
+  checkCloudSizes(cloud);
+  const std::string coordinate_types = "float32 or float64";
+  const FieldReader x = requireField(cloud, "x", {PointField::FLOAT32, PointField::FLOAT64}, coordinate_types);
+  const FieldReader y = requireField(cloud, "y", {PointField::FLOAT32, PointField::FLOAT64}, coordinate_types);
+  const FieldReader z = requireField(cloud, "z", {PointField::FLOAT32, PointField::FLOAT64}, coordinate_types);
+  const FieldReader intensity = findField(
+      cloud, "intensity",
+      {PointField::INT8, PointField::UINT8, PointField::INT16, PointField::UINT16, PointField::INT32,
+       PointField::UINT32, PointField::FLOAT32, PointField::FLOAT64},
+      "a numeric type");
+  const FieldReader ring = findField(cloud, "ring", {PointField::UINT8, PointField::UINT16}, "uint8 or uint16");
+  // Ouster writes t as uint32 nanoseconds, Velodyne drivers time as float seconds.
+  const std::initializer_list<uint8_t> time_types = {PointField::UINT32, PointField::FLOAT32,
+                                                     PointField::FLOAT64};
+  const std::string time_type_names = "uint32 nanoseconds or float32/float64 seconds";
+  FieldReader time = findField(cloud, "t", time_types, time_type_names);
+  if (!time) time = findField(cloud, "time", time_types, time_type_names);
+  input.intensity_field = intensity ? "intensity" : "";
+  const double time_scale = time && time.field->datatype == PointField::UINT32 ? 1e-9 : 1.0;
+
+  const std::size_t count = std::size_t(cloud.width) * cloud.height;
+  input.points.resize(count);
+  input.intensity.resize(intensity ? count : 0);
+  input.ring.resize(ring ? count : 0);
+  input.time_offset_s.resize(time ? count : 0);
+  input.organized_height = static_cast<int>(cloud.height);
+  input.organized_width = static_cast<int>(cloud.width);
+  input.stamp_ns = cloud.header.stamp.toNSec();
+
+  std::size_t i = 0;
+  for (uint32_t row = 0; row < cloud.height; ++row) {
+    const uint8_t* point = cloud.data.data() + std::size_t(row) * cloud.row_step;
+    for (uint32_t column = 0; column < cloud.width; ++column, ++i, point += cloud.point_step) {
+      input.points[i] = Eigen::Vector3f(static_cast<float>(x.read(point)), static_cast<float>(y.read(point)),
+                                        static_cast<float>(z.read(point)));
+      if (intensity) input.intensity[i] = static_cast<float>(intensity.read(point));
+      if (ring) input.ring[i] = static_cast<uint16_t>(ring.read(point));
+      if (time) input.time_offset_s[i] = static_cast<float>(time.read(point) * time_scale);
+    }
+  }
+}
+
+// ------------------------------------------------------------ Ouster packets
+
+PacketBytes ousterPacketBytes(const topic_tools::ShapeShifter& message, std::vector<uint8_t>& buffer) {
+  // Both drivers' PacketMsg are exactly "uint8[] buf"; the md5 of that definition
+  // guards against a future message of the same name with more fields.
+  static const char* const kPacketMd5 = "4f7b5949e76f86d01e96b0e33ba9b5e3";
+  const std::string& datatype = message.getDataType();
+  if ((datatype != "ouster_ros/PacketMsg" && datatype != "ouster_sensor_msgs/PacketMsg") ||
+      message.getMD5Sum() != kPacketMd5)
+    fail("lidar packets: message type '" + datatype + "' (md5 " + message.getMD5Sum() +
+         ") is not an Ouster packet; expected ouster_ros/PacketMsg or "
+         "ouster_sensor_msgs/PacketMsg (uint8[] buf, md5 " + kPacketMd5 + ")");
+  buffer.resize(message.size());
+  ros::serialization::OStream stream(buffer.data(), static_cast<uint32_t>(buffer.size()));
+  message.write(stream);
+  if (buffer.size() < sizeof(uint32_t))
+    fail("lidar packets: " + datatype + " of " + std::to_string(buffer.size()) +
+         " bytes has no length prefix");
+  const uint32_t length = readUnaligned<uint32_t>(buffer.data());
+  if (length != buffer.size() - sizeof(uint32_t))
+    fail("lidar packets: " + datatype + " says buf has " + std::to_string(length) +
+         " bytes, the message carries " + std::to_string(buffer.size() - sizeof(uint32_t)));
+  return PacketBytes{buffer.data() + sizeof(uint32_t), length};
+}
+
+}  // namespace range_image_mapping
