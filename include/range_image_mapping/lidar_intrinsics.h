@@ -107,7 +107,7 @@ class LidarModel {
   // order, at least 2H bins, fine enough that the neighbour check is exact.
   std::vector<int16_t> inverse_altitude_;
   std::vector<int> rows_by_altitude_;       // rank -> row, ascending altitude
-  std::vector<float> sin_midpoint_above_;   // sin of the angle halfway to the next rank
+  std::vector<float> cell_bound_;           // H+1 sines of the midpoints between ranks
   float table_bins_per_unit_ = 0.0f;
   float column_per_radian_ = 0.0f;
   float accept_sin_low_ = 0.0f, accept_sin_high_ = 0.0f;

@@ -38,14 +38,16 @@ float fastAtan2(float y, float x) {
   const float shifted = (kSqrt3 * ratio - 1.0f) / (ratio + kSqrt3);
   // Selections as arithmetic, not branches: the signs and octants of real
   // scans change from point to point and would defeat the branch predictor.
-  const bool reduce = ratio > kTan15;
-  const float t = reduce ? shifted : ratio;
+  const float reduce = static_cast<float>(ratio > kTan15);
+  const float t = ratio + reduce * (shifted - ratio);
   const float t2 = t * t;
   float angle = t * (1.0f + t2 * (-1.0f / 3 + t2 * (1.0f / 5 + t2 * (-1.0f / 7 +
                 t2 * (1.0f / 9 + t2 * (-1.0f / 11))))));
-  angle += reduce ? static_cast<float>(M_PI / 6) : 0.0f;
-  if (ay > ax) angle = static_cast<float>(M_PI / 2) - angle;
-  if (x < 0.0f) angle = static_cast<float>(M_PI) - angle;
+  angle += reduce * static_cast<float>(M_PI / 6);
+  const float swapped = static_cast<float>(ay > ax);   // angle -> pi/2 - angle
+  angle += swapped * (static_cast<float>(M_PI / 2) - 2.0f * angle);
+  const float behind = static_cast<float>(x < 0.0f);   // angle -> pi - angle
+  angle += behind * (static_cast<float>(M_PI) - 2.0f * angle);
   return std::copysign(angle, y);
 }
 
@@ -167,12 +169,16 @@ void LidarModel::buildInverseAltitudeTable() {
                    [&](int a, int b) { return altitude[a] < altitude[b]; });
   const auto sorted = [&](int rank) { return altitude[rows_by_altitude_[rank]]; };
 
-  sin_midpoint_above_.resize(std::max(rows - 1, 0));
+  // Rank r covers [cell_bound_[r], cell_bound_[r + 1]); the outer bounds lie
+  // beyond any sine so the neighbour check needs no range test.
+  cell_bound_.assign(rows + 1, 0.0f);
+  cell_bound_.front() = -2.0f;
+  cell_bound_.back() = 2.0f;
   double smallest_gap = std::numeric_limits<double>::infinity();
-  for (int rank = 0; rank + 1 < rows; ++rank) {
-    sin_midpoint_above_[rank] = static_cast<float>(std::sin(0.5 * (sorted(rank) + sorted(rank + 1))));
-    if (rank > 0) {
-      const double gap = double(sin_midpoint_above_[rank]) - sin_midpoint_above_[rank - 1];
+  for (int rank = 1; rank < rows; ++rank) {
+    cell_bound_[rank] = static_cast<float>(std::sin(0.5 * (sorted(rank - 1) + sorted(rank))));
+    if (rank > 1) {
+      const double gap = double(cell_bound_[rank]) - cell_bound_[rank - 1];
       if (gap > 1e-9) smallest_gap = std::min(smallest_gap, gap);
     }
   }
@@ -196,7 +202,7 @@ void LidarModel::buildInverseAltitudeTable() {
   int rank = 0;
   for (std::size_t bin = 0; bin < bins; ++bin) {
     const double centre = accept_sin_low_ + (bin + 0.5) / table_bins_per_unit_;
-    while (rank + 1 < rows && centre > sin_midpoint_above_[rank]) ++rank;
+    while (rank + 1 < rows && centre >= cell_bound_[rank + 1]) ++rank;
     inverse_altitude_[bin] = static_cast<int16_t>(rank);
   }
 }
@@ -206,11 +212,11 @@ inline int LidarModel::nearestRow(float sin_altitude) const {
   const int last_bin = static_cast<int>(inverse_altitude_.size()) - 1;
   const int bin =
       std::min(last_bin, static_cast<int>((sin_altitude - accept_sin_low_) * table_bins_per_unit_));
-  int rank = inverse_altitude_[bin];
-  // Neighbour check in altitude order (paper section 3.2).
-  if (rank > 0 && sin_altitude < sin_midpoint_above_[rank - 1]) --rank;
-  else if (rank + 1 < intrinsics_.rows && sin_altitude > sin_midpoint_above_[rank]) ++rank;
-  return rows_by_altitude_[rank];
+  const int rank = inverse_altitude_[bin];
+  // Neighbour check in altitude order (paper section 3.2), without branches:
+  // which side of a midpoint a point falls is random from point to point.
+  const int nearest = rank + (sin_altitude >= cell_bound_[rank + 1]) - (sin_altitude < cell_bound_[rank]);
+  return rows_by_altitude_[nearest];
 }
 
 float LidarModel::columnOfEncoderAngle(float encoder_angle_rad) const {
@@ -218,8 +224,8 @@ float LidarModel::columnOfEncoderAngle(float encoder_angle_rad) const {
   const float columns = static_cast<float>(intrinsics_.columns);
   float u = encoder_angle_rad * column_per_radian_;
   if (u < -columns || u >= 2.0f * columns) u -= columns * std::floor(u / columns);  // rare: far outside
-  if (u < 0.0f) u += columns;
-  if (u >= columns) u -= columns;
+  u += columns * static_cast<float>(u < 0.0f);  // arithmetic: the sign is random per point
+  u -= columns * static_cast<float>(u >= columns);
   return u;
 }
 
