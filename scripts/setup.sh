@@ -17,7 +17,7 @@ export PATH="/usr/bin:/bin:/usr/sbin:/sbin:$PATH"
 
 packages=(
   build-essential cmake pkg-config git
-  catkin ros-core-dev python3-roslaunch python3-rostest python3-rosbag
+  catkin ros-core-dev rosbash python3-roslaunch python3-rostest python3-rosbag
   libnodeletlib-dev libnodeletlib-tools libnodelet-dev pluginlib-dev libtopic-tools-dev
   libtf2-ros-dev libtf2-eigen-dev libsensor-msgs-dev libnav-msgs-dev libvisualization-msgs-dev
   librostest-dev libgtest-dev libbenchmark-dev
@@ -65,7 +65,8 @@ demo() {
     echo "The demo decodes a real Ouster capture, $capture, which is not on this machine." >&2
     exit 1
   fi
-  rosrun range_image_mapping rim decode "$capture" --metadata "$metadata" --out "$repository/out/decode"
+  "$workspace/devel/lib/range_image_mapping/rim" decode "$capture" --metadata "$metadata" \
+    --out "$repository/out/decode"
 }
 
 run_tests() {
