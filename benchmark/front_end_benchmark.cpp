@@ -131,6 +131,16 @@ void projectFrame(benchmark::State& state) {
   }
 }
 
+void projectFrameBatched(benchmark::State& state) {
+  const Fixture& f = fixture();
+  std::vector<ProjectedPixel> pixels(f.points.size());
+  std::vector<uint8_t> hits(f.points.size());
+  for (auto _ : state) {
+    f.model->projectMany(f.points.data(), f.points.size(), pixels.data(), hits.data());
+    benchmark::DoNotOptimize(pixels.data());
+  }
+}
+
 // The paper's procedure written plainly: trig calls in every iteration and
 // the nearest beam by a scan over all of them.
 void projectFrameLiterally(benchmark::State& state) {
@@ -163,6 +173,7 @@ BENCHMARK(copyFramePackets)->Unit(benchmark::kMicrosecond);
 BENCHMARK(unprojectFrame)->Unit(benchmark::kMicrosecond);
 BENCHMARK(unprojectFrameWithTrigonometry)->Unit(benchmark::kMicrosecond);
 BENCHMARK(projectFrame)->Unit(benchmark::kMicrosecond);
+BENCHMARK(projectFrameBatched)->Unit(benchmark::kMicrosecond);
 BENCHMARK(projectFrameLiterally)->Unit(benchmark::kMicrosecond);
 
 // Keeps each benchmark's CPU time per iteration so the ratios can be printed.
@@ -199,5 +210,7 @@ int main(int argc, char** argv) {
   line("decode", "decodeFrame", "copyFramePackets");
   line("unproject", "unprojectFrame", "unprojectFrameWithTrigonometry");
   line("project", "projectFrame", "projectFrameLiterally");
+  line("project*", "projectFrameBatched", "projectFrameLiterally");
+  std::cout << "(project: LidarModel::project per point; project*: LidarModel::projectMany)\n";
   return 0;
 }

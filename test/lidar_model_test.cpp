@@ -151,6 +151,37 @@ TEST(LidarModel, ProjectionPicksTheNearestBeamForArbitraryPoints) {
   EXPECT_GT(checked, 5000);
 }
 
+TEST(LidarModel, ProjectManyAgreesWithProjectPointByPoint) {
+  for (const LidarModel& model :
+       {LidarModel(ousterLikeIntrinsics(64, 1024)),
+        LidarModel(LidarIntrinsics::synthetic(64, 2048, 2.0 * kDegree, -24.8 * kDegree))}) {
+    std::mt19937 random(11);
+    std::uniform_real_distribution<float> coordinate(-40.0f, 40.0f);
+    std::vector<Eigen::Vector3f> points;
+    for (int i = 0; i < 5000; ++i)
+      points.emplace_back(coordinate(random), coordinate(random), 0.3f * coordinate(random));
+    points.emplace_back(0.0f, 0.0f, 5.0f);                 // on the axis
+    points.emplace_back(std::nanf(""), 1.0f, 1.0f);        // not a number
+    points.emplace_back(0.01f, 0.0f, 0.0f);                // inside the beam-origin circle
+    for (int v = 0; v < model.rows(); v += 7)              // exactly on beams, across the seam
+      for (int u : {0, 1, model.columns() - 1}) points.push_back(model.unproject(u, v, 3.0f));
+    std::vector<ProjectedPixel> pixels(points.size());
+    std::vector<uint8_t> hits(points.size());
+    model.projectMany(points.data(), points.size(), pixels.data(), hits.data());
+    std::size_t hit_count = 0;
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      const auto expected = model.project(points[i]);
+      ASSERT_EQ(bool(hits[i]), expected.has_value()) << "point " << i;
+      if (!expected) continue;
+      ++hit_count;
+      EXPECT_EQ(pixels[i].row, expected->row) << "point " << i;
+      EXPECT_EQ(pixels[i].column, expected->column) << "point " << i;
+      EXPECT_FLOAT_EQ(pixels[i].range, expected->range) << "point " << i;
+    }
+    EXPECT_GT(hit_count, 1000u);
+  }
+}
+
 TEST(RangeImage, StridedViewReadsTheFullImageWithoutCopying) {
   auto model = std::make_shared<const LidarModel>(ousterLikeIntrinsics(16, 64));
   RangeImage image(model);

@@ -73,6 +73,20 @@ TEST_P(RealCaptureRoundTrip, ProjectionReturnsEveryValidPixel) {
       }
   }
   ASSERT_GT(total, 1000u);
+  // The batched projection gives the same pixels.
+  for (const RangeImage& image : images) {
+    const std::vector<Eigen::Vector3f> points = image.unprojectAll();
+    std::vector<ProjectedPixel> pixels(points.size());
+    std::vector<uint8_t> hits(points.size());
+    image.model->projectMany(points.data(), points.size(), pixels.data(), hits.data());
+    std::size_t disagreements = 0;
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      const auto single = image.model->project(points[i]);
+      disagreements += bool(hits[i]) != single.has_value() ||
+                       (single && (pixels[i].row != single->row || pixels[i].column != single->column));
+    }
+    EXPECT_EQ(disagreements, 0u);
+  }
   const double exact_fraction = double(exact) / double(total);
   std::cout << "  " << GetParam().pcap << ": " << total << " valid pixels, exact "
             << 100.0 * exact_fraction << " %, worst row error " << worst_row

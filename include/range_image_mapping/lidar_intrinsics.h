@@ -85,6 +85,11 @@ class LidarModel {
   // field of view (beyond half a beam spacing past the outermost beams) or
   // closer to the beam origin than the origin offset.
   std::optional<ProjectedPixel> project(const Eigen::Vector3f& point_lidar) const;
+  // Pi for many points: hits[i] = 1 and pixels[i] = project(points[i]) where
+  // it hits, hits[i] = 0 (pixels[i] untouched) where it does not. Several
+  // times faster than calling project() per point.
+  void projectMany(const Eigen::Vector3f* points, std::size_t count, ProjectedPixel* pixels,
+                   uint8_t* hits) const;
   // Pi with the row already known (a cloud's ring field): only the column
   // and range are solved for.
   std::optional<ProjectedPixel> projectOnRow(const Eigen::Vector3f& point_lidar, int row) const;

@@ -23,15 +23,19 @@ double encoderAngle(int column, int columns) { return kTwoPi - kTwoPi * column /
 // origin is known; a second change would need beams closer than r0 / range.
 constexpr int kRowAttempts = 3;
 
+// Points nearer the z axis than this many r0 are not projected: the series
+// for the beam-origin correction need r0 / distance <= 1/4.
+constexpr float kNearestAxisDistance = 4.0f;
+
 // atan2 without the library call, as exact as float allows (3e-9 rad before
 // rounding): fold the ratio into [0, 1], then past tan(15 deg) shift it by
 // 30 deg with atan(t) = pi/6 + atan((sqrt(3) t - 1) / (t + sqrt(3))), and sum
 // the Taylor series of atan up to t^11 on |t| <= tan(15 deg). Pixels on
 // column borders then fall on the same side as with std::atan2.
-float fastAtan2(float y, float x) {
+inline float fastAtan2(float y, float x) {
   const float ax = std::abs(x), ay = std::abs(y);
-  const float larger = std::max(ax, ay);
-  if (larger == 0.0f) return 0.0f;
+  // 0 / tiny = 0 at the origin, without a branch that would stop vectorising.
+  const float larger = std::max(std::max(ax, ay), std::numeric_limits<float>::min());
   const float ratio = std::min(ax, ay) / larger;
   constexpr float kSqrt3 = 1.7320508075688772f;
   constexpr float kTan15 = 0.2679491924311227f;
@@ -243,16 +247,55 @@ std::optional<ProjectedPixel> LidarModel::projectOnRow(const Eigen::Vector3f& po
 // e(theta_e + theta_lut[v]) to the point P at azimuth alpha, distance rho.
 // Crossing both sides with that direction gives
 //   sin(alpha - theta_e - theta_lut[v]) = -r0 sin(theta_lut[v]) / rho,
-// so theta_e = alpha - theta_lut[v] + asin(r0 sin(theta_lut[v]) / rho).
+// so theta_e = alpha - theta_lut[v] + delta with sin(delta) = r0 sin(theta_lut[v]) / rho.
 // The row is found from the elevation of P - B; B depends on the row only
 // through theta_lut, so one re-check of the row settles it.
+namespace {
+
+struct BeamOriginCorrection {
+  float sin_delta;
+  float ray_length;  // |P - B|
+};
+
+inline BeamOriginCorrection correctForBeamOrigin(float rho_squared, float rho, float dz, float r0,
+                                                 float offset_cos, float offset_sin) {
+  const float sin_delta = r0 * offset_sin / rho;
+  const float sin_delta2 = sin_delta * sin_delta;
+  const float cos_delta = 1.0f - sin_delta2 * (0.5f + 0.125f * sin_delta2);  // series, as asin below
+  // cos(alpha - theta_e) = cos(theta_lut - delta)
+  const float cos_point_to_origin = offset_cos * cos_delta + offset_sin * sin_delta;
+  const float ray_length =
+      std::sqrt(std::max(0.0f, rho_squared + r0 * r0 - 2.0f * r0 * rho * cos_point_to_origin + dz * dz));
+  return {sin_delta, ray_length};
+}
+
+// asin by its series: |sin_delta| <= r0 / rho <= 1/4, where three terms are
+// within 3e-6 rad (5e-9 rad below 0.1, i.e. beyond 10 r0).
+inline float encoderAngleOf(float x, float y, float azimuth_offset, float sin_delta) {
+  const float delta2 = sin_delta * sin_delta;
+  const float delta = sin_delta * (1.0f + delta2 * (1.0f / 6.0f + delta2 * (3.0f / 40.0f)));
+  return fastAtan2(y, x) - azimuth_offset + delta;
+}
+
+// Nearest column of an encoder angle within (-2 pi - 0.3, 2 pi + 0.3), the
+// range encoderAngleOf returns; column_per_radian is -W / (2 pi).
+inline int nearestColumn(float encoder_angle, float column_per_radian, float columns) {
+  float u = encoder_angle * column_per_radian + 0.5f;
+  u += columns * static_cast<float>(u < 0.0f);  // arithmetic: the sign is random per point
+  u -= columns * static_cast<float>(u >= columns);
+  const int column = static_cast<int>(u);
+  return column - static_cast<int>(columns) * (column >= static_cast<int>(columns));  // seam
+}
+
+}  // namespace
+
 std::optional<ProjectedPixel> LidarModel::solveProjection(const Eigen::Vector3f& point,
                                                           int fixed_row) const {
   const float rho_squared = point.x() * point.x() + point.y() * point.y();
   if (!(rho_squared > 0.0f)) return std::nullopt;  // on the axis, or NaN
   const float rho = std::sqrt(rho_squared);
-  // Inside the beam-origin circle, or so close that the series below fail.
-  if (rho <= 4.0f * beam_origin_radius_) return std::nullopt;
+  // Inside the beam-origin circle, or so close that the series fail.
+  if (rho <= kNearestAxisDistance * beam_origin_radius_) return std::nullopt;
   const float dz = point.z() - beam_origin_z_;
   const float r0 = beam_origin_radius_;
   int row = fixed_row;
@@ -262,30 +305,82 @@ std::optional<ProjectedPixel> LidarModel::solveProjection(const Eigen::Vector3f&
     row = nearestRow(dz / std::sqrt(planar * planar + dz * dz));
     if (row < 0) return std::nullopt;
   }
-  float sin_delta = 0.0f, ray_length = 0.0f;
+  BeamOriginCorrection correction{};
   for (int attempt = 0; attempt < kRowAttempts; ++attempt) {
-    sin_delta = r0 * azimuth_offset_sin_[row] / rho;
-    const float sin_delta2 = sin_delta * sin_delta;
-    const float cos_delta = 1.0f - sin_delta2 * (0.5f + 0.125f * sin_delta2);  // series, as asin below
-    // cos(alpha - theta_e) = cos(theta_lut - delta)
-    const float cos_point_to_origin =
-        azimuth_offset_cos_[row] * cos_delta + azimuth_offset_sin_[row] * sin_delta;
-    ray_length = std::sqrt(std::max(
-        0.0f, rho_squared + r0 * r0 - 2.0f * r0 * rho * cos_point_to_origin + dz * dz));
+    correction = correctForBeamOrigin(rho_squared, rho, dz, r0, azimuth_offset_cos_[row],
+                                      azimuth_offset_sin_[row]);
     if (fixed_row >= 0 || r0 == 0.0f) break;
-    const int better_row = nearestRow(dz / ray_length);
+    const int better_row = nearestRow(dz / correction.ray_length);
     if (better_row < 0) return std::nullopt;
     if (better_row == row) break;
     row = better_row;
   }
-  // asin by its series: |sin_delta| <= r0 / rho <= 1/4, where three terms are
-  // within 4e-5 rad (1e-7 rad below 0.1, i.e. beyond 10 r0).
-  const float delta2 = sin_delta * sin_delta;
-  const float delta = sin_delta * (1.0f + delta2 * (1.0f / 6.0f + delta2 * (3.0f / 40.0f)));
-  const float encoder_angle = fastAtan2(point.y(), point.x()) - azimuth_offset_[row] + delta;
-  int column = static_cast<int>(columnOfEncoderAngle(encoder_angle) + 0.5f);
-  if (column >= intrinsics_.columns) column -= intrinsics_.columns;  // seam
-  return ProjectedPixel{column, row, ray_length + beam_origin_norm_};
+  const float encoder_angle =
+      encoderAngleOf(point.x(), point.y(), azimuth_offset_[row], correction.sin_delta);
+  return ProjectedPixel{nearestColumn(encoder_angle, column_per_radian_, float(intrinsics_.columns)),
+                        row, correction.ray_length + beam_origin_norm_};
+}
+
+// The same arithmetic as solveProjection, in passes over blocks of points so
+// that the compiler vectorises the square roots and divisions; only the table
+// look-ups stay scalar. A point whose row changes on the re-check (rare) takes
+// the scalar path.
+void LidarModel::projectMany(const Eigen::Vector3f* points, std::size_t count, ProjectedPixel* pixels,
+                             uint8_t* hits) const {
+  constexpr std::size_t kBlock = 256;
+  alignas(32) float x[kBlock], y[kBlock], rho_squared[kBlock], rho[kBlock], dz[kBlock];
+  alignas(32) float sin_elevation[kBlock], offset_cos[kBlock], offset_sin[kBlock], offset[kBlock];
+  alignas(32) float sin_delta[kBlock], ray_length[kBlock], encoder_angle[kBlock];
+  alignas(32) int row[kBlock];
+  const float r0 = beam_origin_radius_;
+  const float nearest_rho = kNearestAxisDistance * r0;
+  const float columns = static_cast<float>(intrinsics_.columns);
+  for (std::size_t start = 0; start < count; start += kBlock) {
+    const std::size_t n = std::min(kBlock, count - start);
+    const Eigen::Vector3f* block = points + start;
+    for (std::size_t i = 0; i < n; ++i) {
+      x[i] = block[i].x();
+      y[i] = block[i].y();
+      dz[i] = block[i].z() - beam_origin_z_;
+    }
+    for (std::size_t i = 0; i < n; ++i) {  // vectorised
+      rho_squared[i] = x[i] * x[i] + y[i] * y[i];
+      rho[i] = std::sqrt(rho_squared[i]);
+      const float planar = rho[i] - r0;
+      sin_elevation[i] = dz[i] / std::sqrt(planar * planar + dz[i] * dz[i]);
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+      const bool usable = rho_squared[i] > 0.0f && rho[i] > nearest_rho;  // false for NaN
+      row[i] = usable ? nearestRow(sin_elevation[i]) : -1;
+      const int table_row = std::max(row[i], 0);
+      offset_cos[i] = azimuth_offset_cos_[table_row];
+      offset_sin[i] = azimuth_offset_sin_[table_row];
+      offset[i] = azimuth_offset_[table_row];
+    }
+    for (std::size_t i = 0; i < n; ++i) {  // vectorised
+      const BeamOriginCorrection correction =
+          correctForBeamOrigin(rho_squared[i], rho[i], dz[i], r0, offset_cos[i], offset_sin[i]);
+      sin_delta[i] = correction.sin_delta;
+      ray_length[i] = correction.ray_length;
+      sin_elevation[i] = dz[i] / correction.ray_length;
+      encoder_angle[i] = encoderAngleOf(x[i], y[i], offset[i], correction.sin_delta);
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+      if (row[i] < 0) {
+        hits[start + i] = 0;
+        continue;
+      }
+      if (r0 != 0.0f && nearestRow(sin_elevation[i]) != row[i]) {
+        const std::optional<ProjectedPixel> pixel = solveProjection(block[i], -1);
+        hits[start + i] = pixel.has_value();
+        if (pixel) pixels[start + i] = *pixel;
+        continue;
+      }
+      hits[start + i] = 1;
+      pixels[start + i] = {nearestColumn(encoder_angle[i], column_per_radian_, columns), row[i],
+                           ray_length[i] + beam_origin_norm_};
+    }
+  }
 }
 
 }  // namespace range_image_mapping
