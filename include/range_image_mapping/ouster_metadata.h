@@ -5,6 +5,7 @@
 #include "range_image_mapping/lidar_intrinsics.h"
 
 #include <array>
+#include <cstdint>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -43,6 +44,7 @@ struct OusterMetadata {
   std::string prod_line;
   std::string firmware;    // build_rev
   std::string serial;      // prod_sn
+  uint32_t initialization_id = 0;  // packet headers carry its low 24 bits
   double frequency_hz = 10.0;
   std::string json;        // the original text, so it can travel with the data
 };

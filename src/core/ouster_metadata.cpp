@@ -206,6 +206,10 @@ OusterMetadata parseOusterMetadata(const std::string& json_text) {
     metadata.serial = value->isUInt64() ? std::to_string(value->asUInt64())
                                         : stringField(*value, "prod_sn");
   }
+  if (const Json::Value* value = findField(root, kSensorInfoSections, "initialization_id")) {
+    if (!value->isUInt()) fail("initialization_id must be a non-negative integer");
+    metadata.initialization_id = value->asUInt();
+  }
 
   // Columns and rate: lidar_mode is authoritative, columns_per_frame must agree.
   const Json::Value* mode_value = findField(root, kConfigSections, "lidar_mode");

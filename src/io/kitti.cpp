@@ -60,6 +60,23 @@ PointCloudInput readKittiVelodyne(const std::string& path) {
   return cloud;
 }
 
+void writeKittiVelodyne(const std::string& path, const std::vector<Eigen::Vector3f>& points,
+                        const std::vector<float>& intensities) {
+  if (!intensities.empty() && intensities.size() != points.size())
+    throw std::invalid_argument("writeKittiVelodyne: " + std::to_string(intensities.size()) +
+                                " intensities for " + std::to_string(points.size()) + " points");
+  std::string bytes;
+  bytes.reserve(points.size() * kBytesPerVelodynePoint);
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    for (int axis = 0; axis < 3; ++axis) appendLittleEndian<float>(bytes, points[i][axis]);
+    appendLittleEndian<float>(bytes, intensities.empty() ? 0.0f : intensities[i]);
+  }
+  std::ofstream file(path, std::ios::binary);
+  if (!file) throw KittiFormatError("KITTI: cannot write " + path);
+  file.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  if (!file.flush()) throw KittiFormatError("KITTI: writing " + path + " failed");
+}
+
 std::vector<Eigen::Isometry3d> readKittiPoses(const std::string& path) {
   std::ifstream file = openForReading(path);
   std::vector<Eigen::Isometry3d> poses;

@@ -1,12 +1,15 @@
 #include "range_image_mapping/io/ply.h"
 
 #include "little_endian.h"
+#include "triangle_fan.h"
 
 #include <algorithm>
 #include <array>
 #include <cerrno>
+#include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <iomanip>
 #include <iterator>
 #include <limits>
 #include <optional>
@@ -235,39 +238,110 @@ class BodyReader {
     return value;
   }
 
-  // Reads one element instance; hands each scalar property's value to `use`.
-  template <typename Use>
-  void instance(const Element& element, Use&& use) {
+  // Reads one element instance; hands each scalar property's value to `use`
+  // and each list property's items to `use_list`.
+  template <typename Use, typename UseList>
+  void instance(const Element& element, Use&& use, UseList&& use_list) {
     for (std::size_t p = 0; p < element.properties.size(); ++p) {
       const Property& property = element.properties[p];
       if (property.list_count_type) {
         const double count = scalar(*property.list_count_type);
         if (count < 0) fail("has a negative list length");
-        for (std::size_t item = 0; item < static_cast<std::size_t>(count); ++item)
-          scalar(property.type);
+        // Every item takes at least a byte: a huge count cannot allocate beyond the file.
+        if (count > static_cast<double>(remainingBytes()))
+          fail("has a list of " + std::to_string(static_cast<long long>(count)) +
+               " items but only " + std::to_string(remainingBytes()) + " bytes left");
+        list_.resize(static_cast<std::size_t>(count));
+        for (double& item : list_) item = scalar(property.type);
+        use_list(p, list_);
       } else {
         use(p, scalar(property.type));
       }
     }
   }
+  template <typename Use>
+  void instance(const Element& element, Use&& use) {
+    instance(element, use, [](std::size_t, const std::vector<double>&) {});
+  }
 
   std::size_t remainingBytes() const { return bytes_.size() - position_; }
 
   [[noreturn]] void fail(const std::string& problem) const {
-    throw PlyFormatError("PLY: " + path_ + " " + problem);
+    throw PlyFormatError("PLY: " + path_ + " " + problem + lineSuffix());
   }
 
  private:
+  // ASCII bodies are edited by hand, so their errors name the line.
+  std::string lineSuffix() const {
+    if (encoding_ != Encoding::kAscii) return "";
+    const auto end =
+        bytes_.begin() + static_cast<std::ptrdiff_t>(std::min(position_, bytes_.size()));
+    return " (line " + std::to_string(1 + std::count(bytes_.begin(), end, '\n')) + ")";
+  }
+
   const std::string& path_;
   const std::string& bytes_;
   Encoding encoding_;
   std::size_t position_;
+  std::vector<double> list_;  // reused for every list, so faces do not allocate
 };
+
+// Integers as integers (list items arrive as double), anything else as it is.
+std::string numberText(double value) {
+  std::ostringstream text;
+  text << std::setprecision(15) << value;
+  return text.str();
+}
 
 std::string readWholeFile(const std::string& path) {
   std::ifstream file(path, std::ios::binary);
   if (!file) throw PlyFormatError("PLY: cannot open " + path);
   return std::string((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
+}
+
+// ---------------------------------------------------------------- vertex positions
+
+struct VertexPositions {
+  std::vector<Element>::const_iterator element;
+  std::array<std::size_t, 3> property{};  // index of x, y, z among the vertex properties
+};
+
+VertexPositions findVertexPositions(const std::string& path, const Header& header) {
+  VertexPositions positions;
+  positions.element = std::find_if(header.elements.begin(), header.elements.end(),
+                                   [](const Element& element) { return element.name == "vertex"; });
+  if (positions.element == header.elements.end())
+    throw PlyFormatError("PLY: " + path + " has no vertex element");
+  const std::array<const char*, 3> axis_names{"x", "y", "z"};
+  const auto& properties = positions.element->properties;
+  for (int axis = 0; axis < 3; ++axis) {
+    const auto found =
+        std::find_if(properties.begin(), properties.end(), [&](const Property& property) {
+          return property.name == axis_names[axis] && !property.list_count_type;
+        });
+    if (found == properties.end())
+      throw PlyFormatError("PLY: " + path + " has no scalar vertex property " + axis_names[axis]);
+    positions.property[axis] = static_cast<std::size_t>(found - properties.begin());
+  }
+  return positions;
+}
+
+// Reads the vertex element; the body must be positioned at its start.
+std::vector<Eigen::Vector3f> readVertexPositions(BodyReader& body,
+                                                 const VertexPositions& positions) {
+  // Every vertex takes at least a byte, so a count beyond the file is caught
+  // before it turns into a huge allocation.
+  if (positions.element->count > body.remainingBytes())
+    body.fail("declares " + std::to_string(positions.element->count) + " vertices but has only " +
+              std::to_string(body.remainingBytes()) + " bytes of data");
+  std::vector<Eigen::Vector3f> points(positions.element->count);
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    body.instance(*positions.element, [&](std::size_t property, double value) {
+      for (int axis = 0; axis < 3; ++axis)
+        if (property == positions.property[axis]) points[i][axis] = static_cast<float>(value);
+    });
+  }
+  return points;
 }
 
 // ---------------------------------------------------------------- writing
@@ -386,42 +460,67 @@ void writePlyMesh(const std::string& path, const std::vector<Eigen::Vector3f>& v
 std::vector<Eigen::Vector3f> readPlyPoints(const std::string& path) {
   const std::string bytes = readWholeFile(path);
   const Header header = HeaderParser(path, bytes).parse();
-  const auto vertex_element =
-      std::find_if(header.elements.begin(), header.elements.end(),
-                   [](const Element& element) { return element.name == "vertex"; });
-  if (vertex_element == header.elements.end())
-    throw PlyFormatError("PLY: " + path + " has no vertex element");
-  std::array<std::size_t, 3> axis_property{};
-  const std::array<const char*, 3> axis_names{"x", "y", "z"};
-  for (int axis = 0; axis < 3; ++axis) {
-    const auto& properties = vertex_element->properties;
-    const auto found =
-        std::find_if(properties.begin(), properties.end(), [&](const Property& property) {
-          return property.name == axis_names[axis] && !property.list_count_type;
-        });
-    if (found == properties.end())
-      throw PlyFormatError("PLY: " + path + " has no scalar vertex property " + axis_names[axis]);
-    axis_property[axis] = static_cast<std::size_t>(found - properties.begin());
-  }
+  const VertexPositions positions = findVertexPositions(path, header);
 
   BodyReader body(path, bytes, header);
   const auto ignore = [](std::size_t, double) {};
-  for (auto element = header.elements.begin(); element != vertex_element; ++element)
+  for (auto element = header.elements.begin(); element != positions.element; ++element)
     for (std::size_t i = 0; i < element->count; ++i) body.instance(*element, ignore);
+  return readVertexPositions(body, positions);
+}
 
-  // Every vertex takes at least a byte, so a count beyond the file is caught
-  // before it turns into a huge allocation.
-  if (vertex_element->count > body.remainingBytes())
-    body.fail("declares " + std::to_string(vertex_element->count) + " vertices but has only " +
-              std::to_string(body.remainingBytes()) + " bytes of data");
-  std::vector<Eigen::Vector3f> points(vertex_element->count);
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    body.instance(*vertex_element, [&](std::size_t property, double value) {
-      for (int axis = 0; axis < 3; ++axis)
-        if (property == axis_property[axis]) points[i][axis] = static_cast<float>(value);
-    });
+PlyMesh readPlyMesh(const std::string& path) {
+  const std::string bytes = readWholeFile(path);
+  const Header header = HeaderParser(path, bytes).parse();
+  const VertexPositions positions = findVertexPositions(path, header);
+  const std::size_t vertex_count = positions.element->count;
+
+  PlyMesh mesh;
+  bool have_faces = false;
+  BodyReader body(path, bytes, header);
+  std::vector<int> polygon;
+  for (auto element = header.elements.begin(); element != header.elements.end(); ++element) {
+    if (element == positions.element) {
+      mesh.vertices = readVertexPositions(body, positions);
+      continue;
+    }
+    const auto corners = element->name == "face"
+                             ? std::find_if(element->properties.begin(), element->properties.end(),
+                                            [](const Property& property) {
+                                              return property.list_count_type &&
+                                                     (property.name == "vertex_indices" ||
+                                                      property.name == "vertex_index");
+                                            })
+                             : element->properties.end();
+    const auto ignore = [](std::size_t, double) {};
+    if (corners == element->properties.end()) {
+      for (std::size_t i = 0; i < element->count; ++i) body.instance(*element, ignore);
+      continue;
+    }
+    have_faces = true;
+    const auto corners_property = static_cast<std::size_t>(corners - element->properties.begin());
+    // Two triangles per face is a fair guess; the byte count bounds a hostile face count.
+    mesh.triangles.reserve(std::min(element->count, body.remainingBytes()) * 2);
+    for (std::size_t face = 0; face < element->count; ++face) {
+      body.instance(*element, ignore, [&](std::size_t property, const std::vector<double>& items) {
+        if (property != corners_property) return;
+        if (items.size() < 3)
+          body.fail("face " + std::to_string(face) + " has " + std::to_string(items.size()) +
+                    " vertices; a face needs at least 3");
+        polygon.clear();
+        for (const double index : items) {
+          if (index < 0 || index >= static_cast<double>(vertex_count) || index != std::floor(index))
+            body.fail("face " + std::to_string(face) + " refers to vertex " + numberText(index) +
+                      " of " + std::to_string(vertex_count));
+          polygon.push_back(static_cast<int>(index));
+        }
+        appendTriangleFan(polygon, mesh.triangles);
+      });
+    }
   }
-  return points;
+  if (!have_faces)
+    throw PlyFormatError("PLY: " + path + " has no face element with a vertex_indices list");
+  return mesh;
 }
 
 }  // namespace range_image_mapping::io

@@ -8,6 +8,8 @@ int main(int argc, char** argv) {
   CLI::App app{"rim: LiDAR range-image odometry and mapping tools"};
   app.require_subcommand(1);
   range_image_mapping::tool::addDecodeCommand(app);
+  range_image_mapping::tool::addSimulateCommand(app);
+  range_image_mapping::tool::addEvalCommand(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::RuntimeError& error) {  // a command that ran and failed

@@ -23,6 +23,11 @@ class KittiFormatError : public std::runtime_error {
 // Velodyne frame: x forward, y left, z up). Unorganized, no ring field;
 // intensity holds the reflectance in [0, 1].
 PointCloudInput readKittiVelodyne(const std::string& path);
+// The same format written: intensities empty (written as 0) or one per point.
+// Throws std::invalid_argument when the sizes differ, KittiFormatError when the
+// file cannot be written.
+void writeKittiVelodyne(const std::string& path, const std::vector<Eigen::Vector3f>& points,
+                        const std::vector<float>& intensities);
 
 // One pose per line: 12 numbers, the row-major 3x4 [R | t] of T_world_frame.
 std::vector<Eigen::Isometry3d> readKittiPoses(const std::string& path);

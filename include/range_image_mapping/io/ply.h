@@ -1,5 +1,5 @@
 // PLY files: binary little-endian point clouds with extra per-vertex
-// properties, triangle meshes, and reading vertex positions back.
+// properties, triangle meshes, and reading vertex positions and faces back.
 #pragma once
 
 #include <Eigen/Core>
@@ -40,5 +40,17 @@ void writePlyMesh(const std::string& path, const std::vector<Eigen::Vector3f>& v
 // Vertex x, y, z of an ASCII or binary little-endian PLY (any scalar type,
 // converted to float); other properties and elements are skipped.
 std::vector<Eigen::Vector3f> readPlyPoints(const std::string& path);
+
+struct PlyMesh {
+  std::vector<Eigen::Vector3f> vertices;
+  std::vector<Eigen::Vector3i> triangles;
+};
+
+// Vertex x, y, z and the "face" element's "vertex_indices" (or "vertex_index")
+// lists of an ASCII or binary little-endian PLY, any count and index types.
+// Polygons are split into triangle fans (exact for convex polygons). Throws
+// PlyFormatError naming the face for an index out of range or a face with
+// fewer than three corners.
+PlyMesh readPlyMesh(const std::string& path);
 
 }  // namespace range_image_mapping::io

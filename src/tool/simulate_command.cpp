@@ -1,0 +1,385 @@
+// rim simulate: a spinning LiDAR driven through a mesh scene, written as the
+// real sensor's data (pcap, bags, KITTI folders) with exact ground truth.
+#include "commands.h"
+
+#include "range_image_mapping/io/kitti.h"
+#include "range_image_mapping/io/mesh_file.h"
+#include "range_image_mapping/io/pcap_writer.h"
+#include "range_image_mapping/io/ply.h"
+#include "range_image_mapping/io/pose_file.h"
+#include "range_image_mapping/ouster_packet_encoder.h"
+#include "range_image_mapping/simulation/lidar_simulator.h"
+#include "range_image_mapping/simulation/scene_generator.h"
+#include "range_image_mapping/simulation/sensor_presets.h"
+#include "range_image_mapping/simulation/surface_sampler.h"
+#ifdef RIM_WITH_ROSBAG
+#include "range_image_mapping/ros/bag_writer.h"
+#endif
+
+#include <json/json.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <optional>
+#include <set>
+#include <sstream>
+
+namespace range_image_mapping::tool {
+namespace {
+
+using simulation::MotionProfile;
+using simulation::SceneKind;
+
+struct Preset {
+  const char* name;
+  SceneKind scene;
+  const char* sensor;  // OS-0-128, OS-1-128 or hdl64
+  MotionProfile motion;
+  int frames;
+  const char* formats;
+};
+
+const Preset kPresets[] = {
+    {"outdoor_car", SceneKind::kOutdoor, "OS-1-128", MotionProfile::kCar, 300, "pcap"},
+    {"indoor_cart", SceneKind::kIndoor, "OS-0-128", MotionProfile::kCart, 300, "pcap"},
+    {"handheld_fast", SceneKind::kIndoor, "OS-0-128", MotionProfile::kHandheld, 150, "pcap"},
+    {"kitti_like", SceneKind::kOutdoor, "hdl64", MotionProfile::kCar, 300, "kitti"},
+};
+
+// The real sensors' metadata in the shared data folder are the defaults; the
+// built-in approximations stand in where that folder is absent.
+const char* realMetadataFile(const std::string& product) {
+  if (product == "OS-0-128") return "ouster-pcaps/OS-0-128-U1_v2.3.0_1024x10.json";
+  if (product == "OS-1-128") return "ouster-pcaps/OS-1-128_v2.3.0_1024x10.json";
+  return nullptr;
+}
+
+std::string dataDirectory() {
+  if (const char* directory = std::getenv("RIM_DATA_DIR")) return directory;
+  return RIM_DEFAULT_DATA_DIR;
+}
+
+struct SimulateOptions {
+  std::string preset;
+  std::string output_directory;
+  int frames = 0;  // 0: the preset's
+  uint32_t seed = 1;
+  std::string sensor;   // metadata JSON, OS-0-128, OS-1-128 or hdl64 (default: the preset's)
+  std::string scene;    // indoor, outdoor or a PLY/OBJ mesh (default: the preset's)
+  std::string motion;   // car, cart, handheld or a pose file (default: the preset's)
+  std::string formats;  // comma-separated: pcap, bag, points-bag, kitti (default: the preset's)
+  std::string profile = "RNG19_RFL8_SIG16_NIR16";
+  std::string cloud_layout = "organized";
+  double noise_sigma_m = 0.01;
+  double dropout = 0.0;
+  double min_range_m = 0.3;
+  double max_range_m = 120.0;
+  double divergence_rad = 0.0;
+  bool no_motion_distortion = false;
+  double surface_spacing_m = 0.0;  // 0: 2 cm indoors, 7.5 cm outdoors (a 300 m drive sees ~50000 m2)
+  double start_time_s = 1.0;
+};
+
+struct Sensor {
+  LidarModelConstPtr model;
+  std::optional<OusterMetadata> ouster;  // absent for the synthetic HDL-64
+  std::string frame;                     // os_lidar or velodyne
+};
+
+// A metadata file whose UDP profile is replaced: the simulated packets are in
+// that profile, so the metadata written next to them must say so.
+std::string withUdpProfile(const std::string& json_text, UdpProfile profile) {
+  Json::Value root;
+  std::istringstream stream(json_text);
+  std::string errors;
+  if (!Json::parseFromStream(Json::CharReaderBuilder(), stream, &root, &errors))
+    throw std::invalid_argument("metadata: not valid JSON: " + errors);
+  const char* name = toString(profile);
+  if (root.isMember("lidar_data_format")) {  // nested format
+    root["lidar_data_format"]["udp_profile_lidar"] = name;
+    root["config_params"]["udp_profile_lidar"] = name;
+  } else {
+    root["data_format"]["udp_profile_lidar"] = name;
+  }
+  Json::StreamWriterBuilder writer;
+  writer["indentation"] = "  ";
+  return Json::writeString(writer, root);
+}
+
+Sensor makeSensor(const std::string& choice, UdpProfile profile) {
+  Sensor sensor;
+  if (choice == "hdl64") {
+    sensor.model = std::make_shared<const LidarModel>(io::kittiHdl64Intrinsics());
+    sensor.frame = "velodyne";
+    return sensor;
+  }
+  std::string json;
+  if (std::filesystem::exists(choice)) {
+    std::ifstream file(choice);
+    json.assign(std::istreambuf_iterator<char>(file), std::istreambuf_iterator<char>());
+  } else if (const char* relative = realMetadataFile(choice);
+             relative && !dataDirectory().empty() &&
+             std::filesystem::exists(std::filesystem::path(dataDirectory()) / relative)) {
+    std::ifstream file(std::filesystem::path(dataDirectory()) / relative);
+    json.assign(std::istreambuf_iterator<char>(file), std::istreambuf_iterator<char>());
+  } else if (choice == "OS-0-128" || choice == "OS-1-128") {
+    std::cerr << "note: no real " << choice << " metadata at " << dataDirectory() << "/"
+              << (relative ? relative : "") << " (set RIM_DATA_DIR); using the built-in approximation of its beam tables\n";
+    json = simulation::ousterLikeMetadataJson(choice, profile);
+  } else {
+    throw std::invalid_argument("--sensor " + choice +
+                                ": neither a metadata file nor one of OS-0-128, OS-1-128, hdl64");
+  }
+  sensor.ouster = parseOusterMetadata(withUdpProfile(json, profile));
+  sensor.model = std::make_shared<const LidarModel>(sensor.ouster->intrinsics);
+  sensor.frame = "os_lidar";
+  return sensor;
+}
+
+std::set<std::string> parseFormats(const std::string& text, const Sensor& sensor) {
+  std::set<std::string> formats;
+  std::stringstream stream(text);
+  for (std::string format; std::getline(stream, format, ',');) {
+    if (format.empty()) continue;
+    if (format != "pcap" && format != "bag" && format != "points-bag" && format != "kitti")
+      throw std::invalid_argument("--formats: unknown format '" + format +
+                                  "' (known: pcap, bag, points-bag, kitti)");
+    if ((format == "pcap" || format == "bag") && !sensor.ouster)
+      throw std::invalid_argument("--formats " + format + " needs an Ouster sensor, not " +
+                                  sensor.model->intrinsics().sensor_model);
+#ifndef RIM_WITH_ROSBAG
+    if (format == "bag" || format == "points-bag")
+      throw std::invalid_argument("--formats " + format +
+                                  ": this rim was built without ROS (RIM_CORE_ONLY); bags need the catkin build");
+#endif
+    formats.insert(format);
+  }
+  return formats;
+}
+
+// Progress on one line of stderr, with frames per second and time left,
+// redrawn at most five times a second.
+void showProgress(int done, int total, std::chrono::steady_clock::time_point start) {
+  static double last_drawn = -1.0;
+  const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (done < total && elapsed - last_drawn < 0.2) return;
+  last_drawn = elapsed;
+  const double rate = done / std::max(elapsed, 1e-9);
+  const int width = 30, filled = total ? width * done / total : width;
+  std::fprintf(stderr, "\r[%.*s%*s] %d/%d frames, %.1f frames/s, %.0f s left ", filled,
+               "##############################", width - filled, "", done, total, rate,
+               (total - done) / std::max(rate, 1e-9));
+  if (done == total) std::fprintf(stderr, "\n");
+}
+
+int runSimulate(SimulateOptions options) {
+  const Preset* preset = nullptr;
+  for (const Preset& candidate : kPresets)
+    if (options.preset == candidate.name) preset = &candidate;
+  if (!preset && (options.sensor.empty() || options.scene.empty() || options.motion.empty()))
+    throw std::invalid_argument("give --preset, or all of --sensor, --scene and --motion");
+  if (preset) {
+    if (options.sensor.empty()) options.sensor = preset->sensor;
+    if (options.motion.empty())
+      options.motion = preset->motion == MotionProfile::kCar    ? "car"
+                       : preset->motion == MotionProfile::kCart ? "cart"
+                                                                : "handheld";
+    if (options.scene.empty()) options.scene = preset->scene == SceneKind::kIndoor ? "indoor" : "outdoor";
+    if (options.frames == 0) options.frames = preset->frames;
+    if (options.formats.empty()) options.formats = preset->formats;
+  }
+  if (options.frames <= 0) options.frames = 100;
+
+  const UdpProfile profile = udpProfileFromString(options.profile);
+  const Sensor sensor = makeSensor(options.sensor, profile);
+  const std::set<std::string> formats = parseFormats(options.formats, sensor);
+  const std::filesystem::path out(options.output_directory);
+  std::filesystem::create_directories(out);
+
+  // Scene and motion.
+  simulation::Scene scene;
+  if (options.scene == "indoor" || options.scene == "outdoor") {
+    simulation::SceneOptions scene_options;
+    scene_options.kind = options.scene == "indoor" ? SceneKind::kIndoor : SceneKind::kOutdoor;
+    scene_options.seed = options.seed;
+    scene = simulation::generateScene(scene_options);
+  } else {
+    scene.mesh = io::loadMeshFile(options.scene);
+  }
+  const double frequency = sensor.ouster ? sensor.ouster->frequency_hz : 10.0;
+  const double end_time = options.start_time_s + (options.frames + 1) / frequency;
+  std::unique_ptr<simulation::Trajectory> trajectory;
+  if (options.motion == "car" || options.motion == "cart" || options.motion == "handheld") {
+    if (scene.route.size() < 3)
+      throw std::invalid_argument("--motion " + options.motion +
+                                  " follows a generated scene's route; with a mesh file, give a pose file");
+    simulation::MotionOptions motion;
+    motion.profile = options.motion == "car"    ? MotionProfile::kCar
+                     : options.motion == "cart" ? MotionProfile::kCart
+                                                : MotionProfile::kHandheld;
+    motion.duration_s = end_time + 0.5;
+    motion.seed = options.seed;
+    motion.sensor_height_m = motion.profile == MotionProfile::kCar ? 1.8 : 1.2;
+    trajectory = simulation::makeTrajectory(scene, motion);
+  } else {
+    trajectory = simulation::loadTrajectory(options.motion);
+    options.start_time_s = std::max(options.start_time_s, trajectory->startTime());
+  }
+  if (options.start_time_s + options.frames / frequency > trajectory->endTime())
+    throw std::invalid_argument("the trajectory ends at " + std::to_string(trajectory->endTime()) +
+                                " s, before the last of " + std::to_string(options.frames) + " frames");
+
+  simulation::SensorEffects effects;
+  effects.range_noise_sigma_m = options.noise_sigma_m;
+  effects.dropout_probability = options.dropout;
+  effects.min_range_m = options.min_range_m;
+  effects.max_range_m = options.max_range_m;
+  effects.beam_divergence_rad = options.divergence_rad;
+  effects.motion_distortion = !options.no_motion_distortion;
+  if (options.surface_spacing_m <= 0.0) options.surface_spacing_m = options.scene == "indoor" ? 0.02 : 0.075;
+  const simulation::RayCaster caster(scene.mesh);
+  const simulation::LidarSimulator simulator(sensor.model, caster, effects, options.seed, frequency);
+
+  // Outputs.
+  std::unique_ptr<io::OusterPcapWriter> pcap;
+  if (sensor.ouster) {
+    std::ofstream(out / "metadata.json") << sensor.ouster->json;
+    if (formats.count("pcap")) pcap = std::make_unique<io::OusterPcapWriter>((out / "capture.pcap").string(), *sensor.ouster);
+  }
+#ifdef RIM_WITH_ROSBAG
+  std::unique_ptr<BagWriter> packet_bag, points_bag;
+  std::unique_ptr<OusterPacketEncoder> encoder;
+  // Bag times: the simulation clock from a fixed epoch (ROS time 0 means "unset").
+  constexpr int64_t kBagEpochNs = 1'700'000'000'000'000'000;
+  if (formats.count("bag")) {
+    packet_bag = std::make_unique<BagWriter>((out / "packets.bag").string());
+    encoder = std::make_unique<OusterPacketEncoder>(*sensor.ouster);
+    packet_bag->writeOusterMetadata(sensor.ouster->json, kBagEpochNs);
+  }
+  if (formats.count("points-bag")) points_bag = std::make_unique<BagWriter>((out / "points.bag").string());
+  const CloudLayout layout = options.cloud_layout == "plain"         ? CloudLayout::kPlain
+                             : options.cloud_layout == "unorganized" ? CloudLayout::kUnorganized
+                                                                     : CloudLayout::kOrganized;
+#endif
+  if (formats.count("kitti")) std::filesystem::create_directories(out / "velodyne");
+  io::PoseFileInfo pose_info;
+  pose_info.frame = sensor.frame;
+  pose_info.comment = "rim simulate, seed " + std::to_string(options.seed) + ", pose at each scan's first column";
+  io::ColumnTimesWriter column_times((out / "column_times.txt").string(), pose_info);
+  std::vector<io::StampedPose> poses;
+  simulation::SeenRegion seen(std::max(3.0 * options.surface_spacing_m, 0.05));
+
+  const auto started = std::chrono::steady_clock::now();
+  simulation::SimulatedScan scan;
+  for (int frame = 0; frame < options.frames; ++frame) {
+    const double start = options.start_time_s + frame / frequency;
+    simulator.simulate(*trajectory, start, static_cast<uint32_t>(frame), scan);
+    if (sensor.ouster) quantizeForProfile(scan.raw, profile);
+    poses.push_back({start, scan.column_poses.front()});
+    column_times.write(scan.raw.timestamp_ns);
+    // Noise-free hits, in the world: what the sensor saw.
+    const LidarModel& model = *sensor.model;
+    for (int v = 0; v < model.rows(); ++v)
+      for (int u = 0; u < model.columns(); ++u) {
+        const float range = scan.true_range[static_cast<std::size_t>(v) * model.columns() + u];
+        if (std::isfinite(range)) seen.addHit((scan.column_poses[u] * model.unproject(u, v, range).cast<double>()).cast<float>());
+      }
+    if (pcap) pcap->writeScan(scan.raw);
+#ifdef RIM_WITH_ROSBAG
+    if (packet_bag) packet_bag->writeOusterScan(*encoder, scan.raw, kBagEpochNs);
+    if (points_bag) {
+      sensor_msgs::PointCloud2 cloud;
+      rangeImageToPointCloud2(scan.image, layout, sensor.frame, cloud);
+      cloud.header.stamp.fromNSec(kBagEpochNs + static_cast<int64_t>(start * 1e9));
+      points_bag->writePointCloud(cloud, "/points");
+    }
+#endif
+    if (formats.count("kitti")) {
+      char name[32];
+      std::snprintf(name, sizeof name, "%06d.bin", frame);
+      std::vector<Eigen::Vector3f> points;
+      std::vector<float> intensities;
+      for (int v = 0; v < model.rows(); ++v)
+        for (int u = 0; u < model.columns(); ++u)
+          if (scan.image.valid(v, u)) {
+            points.push_back(model.unproject(u, v, scan.image.at(v, u)));
+            intensities.push_back(scan.image.intensity.empty() ? 0.0f
+                                                               : scan.image.intensity[scan.image.index(v, u)] / 255.0f);
+          }
+      io::writeKittiVelodyne((out / "velodyne" / name).string(), points, intensities);
+    }
+    showProgress(frame + 1, options.frames, started);
+  }
+  if (pcap) pcap->close();
+  column_times.close();
+#ifdef RIM_WITH_ROSBAG
+  if (packet_bag) packet_bag->close();
+  if (points_bag) points_bag->close();
+#endif
+
+  // Ground truth: poses in the image's own frame and, for Ouster, the sensor frame.
+  io::writeKittiPosesWithTimes((out / "poses_kitti.txt").string(), poses, pose_info);
+  io::writeTumPoses((out / "poses_tum.txt").string(), poses, pose_info);
+  if (sensor.ouster) {
+    io::PoseFileInfo sensor_info = pose_info;
+    sensor_info.frame = "os_sensor";
+    const auto sensor_poses = io::changePoseFrame(poses, sensor.ouster->intrinsics.lidar_to_sensor.inverse());
+    io::writeKittiPosesWithTimes((out / "poses_sensor_kitti.txt").string(), sensor_poses, sensor_info);
+    io::writeTumPoses((out / "poses_sensor_tum.txt").string(), sensor_poses, sensor_info);
+  }
+  io::saveMeshFile((out / "scene.ply").string(), scene.mesh);
+  simulation::SurfaceSampleOptions sampling;
+  sampling.spacing_m = options.surface_spacing_m;
+  sampling.seed = options.seed;
+  const std::vector<Eigen::Vector3f> surface = simulation::sampleSeenSurface(scene.mesh, seen, sampling);
+  io::writePlyPointCloud((out / "surface.ply").string(), surface);
+
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  std::cout << options.frames << " frames of " << sensor.model->intrinsics().sensor_model << " ("
+            << sensor.model->rows() << " x " << sensor.model->columns() << ") in " << seconds << " s; "
+            << scene.mesh.triangles.size() << " scene triangles, " << surface.size()
+            << " ground-truth surface samples; written to " << out.string() << "\n";
+  return 0;
+}
+
+}  // namespace
+
+void addSimulateCommand(CLI::App& app) {
+  auto options = std::make_shared<SimulateOptions>();
+  CLI::App* command = app.add_subcommand(
+      "simulate", "Simulate a spinning LiDAR in a scene: sensor data plus exact ground truth");
+  std::vector<std::string> preset_names;
+  for (const Preset& preset : kPresets) preset_names.push_back(preset.name);
+  command->add_option("--preset", options->preset, "ready-made sequence")->check(CLI::IsMember(preset_names));
+  command->add_option("--out,-o", options->output_directory, "output directory")->required();
+  command->add_option("--frames", options->frames, "number of scans (default: the preset's)")
+      ->check(CLI::Range(1, 100000));
+  command->add_option("--seed", options->seed, "scene, motion and noise seed");
+  command->add_option("--sensor", options->sensor, "Ouster metadata JSON, OS-0-128, OS-1-128 or hdl64");
+  command->add_option("--scene", options->scene, "indoor, outdoor, or a PLY/OBJ mesh");
+  command->add_option("--motion", options->motion, "car, cart, handheld, or a KITTI/TUM pose file");
+  command->add_option("--formats", options->formats, "comma-separated: pcap, bag, points-bag, kitti");
+  command->add_option("--profile", options->profile, "Ouster UDP profile of the packets")
+      ->check(CLI::IsMember({"LEGACY", "RNG19_RFL8_SIG16_NIR16", "RNG19_RFL8_SIG16_NIR16_DUAL", "RNG15_RFL8_NIR8"}));
+  command->add_option("--cloud-layout", options->cloud_layout, "PointCloud2 layout in points.bag")
+      ->check(CLI::IsMember({"organized", "unorganized", "plain"}));
+  command->add_option("--noise", options->noise_sigma_m, "range noise sigma, metres")->check(CLI::Range(0.0, 1.0));
+  command->add_option("--dropout", options->dropout, "probability of a lost return")->check(CLI::Range(0.0, 1.0));
+  command->add_option("--min-range", options->min_range_m, "metres");
+  command->add_option("--max-range", options->max_range_m, "metres");
+  command->add_option("--divergence", options->divergence_rad, "beam divergence, radians");
+  command->add_flag("--no-motion-distortion", options->no_motion_distortion,
+                    "cast each whole scan from the pose at its first column");
+  command->add_option("--surface-spacing", options->surface_spacing_m,
+                      "spacing of the ground-truth surface samples, metres (default 0.02 indoors, 0.075 otherwise)")
+      ->check(CLI::Range(0.0, 1.0));
+  command->callback([options] { runSimulate(*options); });
+}
+
+}  // namespace range_image_mapping::tool
