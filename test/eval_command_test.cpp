@@ -7,6 +7,7 @@
 #include "range_image_mapping/io/pose_file.h"
 #include "range_image_mapping/simulation/surface_sampler.h"
 #include "range_image_mapping/simulation/triangle_mesh.h"
+#include "rim_command.h"
 #include "test_data.h"
 
 #include <gtest/gtest.h>
@@ -26,15 +27,8 @@
 namespace range_image_mapping::evaluation {
 namespace {
 
-struct RunResult {
-  int exit_code = -1;
-  std::string out, err;
-};
-
-std::string readText(const std::string& path) {
-  std::ifstream file(path, std::ios::binary);
-  return std::string((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
-}
+using test::readText;
+using test::RunResult;
 
 bool contains(const std::string& text, const std::string& part) {
   return text.find(part) != std::string::npos;
@@ -49,35 +43,8 @@ Json::Value parseJson(const std::string& text) {
   return value;
 }
 
-// A fresh folder per test, removed afterwards.
-class EvalCommand : public ::testing::Test {
- protected:
-  void SetUp() override {
-    const auto* test = ::testing::UnitTest::GetInstance()->current_test_info();
-    directory_ = std::filesystem::temp_directory_path() /
-                 ("rim_eval_command_test_" + std::string(test->name()) + "_" + std::to_string(getpid()));
-    std::filesystem::remove_all(directory_);
-    std::filesystem::create_directories(directory_);
-  }
-  void TearDown() override { std::filesystem::remove_all(directory_); }
-
-  std::string path(const std::string& name) const { return (directory_ / name).string(); }
-
-  // `environment` is prepended to the command line, e.g. "PATH=/nonexistent".
-  RunResult rim(const std::string& arguments, const std::string& environment = "") const {
-    const std::string out = path("stdout.txt"), err = path("stderr.txt");
-    const std::string command = environment + " '" + std::string(RIM_BINARY_DIR) + "/rim' " +
-                                arguments + " >'" + out + "' 2>'" + err + "'";
-    const int status = std::system(command.c_str());
-    RunResult result;
-    result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    result.out = readText(out);
-    result.err = readText(err);
-    return result;
-  }
-
-  std::filesystem::path directory_;
-};
+// A fresh folder per test, removed afterwards (test/rim_command.h).
+using EvalCommand = test::RimCommandTest;
 
 // A drive with turns and some climb, 1 m per frame.
 std::vector<Eigen::Isometry3d> wavyTrajectory(int count) {

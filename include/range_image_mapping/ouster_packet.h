@@ -10,6 +10,11 @@
 
 namespace range_image_mapping {
 
+// Facts of a profile's pixel layout.
+std::size_t pixelBytes(UdpProfile profile);
+bool hasSignal(UdpProfile profile);        // all but RNG15_RFL8_NIR8
+bool hasSecondReturn(UdpProfile profile);  // the dual-return profile
+
 // One revolution in the sensor's own units, staggered (column = measurement id),
 // row-major H x W. Missing columns stay zero with status 0.
 struct LidarScan {

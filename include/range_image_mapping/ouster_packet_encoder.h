@@ -35,7 +35,9 @@ uint32_t maxRangeMillimetres(UdpProfile profile);
 // Rounds a scan to what the profile carries, so that decoding its packets gives
 // the scan back exactly: ranges beyond maxRangeMillimetres become 0 (no
 // return), and for RNG15_RFL8_NIR8 ranges go to the nearest 8 mm and near-IR to
-// the nearest multiple of 16 (at most 4080). Column statuses become the
+// the nearest multiple of 16 (at most 4080). The fields are sized as the
+// profile carries them (empty second returns for the dual profile, no signal
+// for RNG15). Column statuses become the
 // profile's valid status (or 0), encoder counts exist only in LEGACY, and
 // columns that are not valid lose their timestamps.
 void quantizeForProfile(LidarScan& scan, UdpProfile profile);

@@ -83,6 +83,9 @@ struct Rng15Rfl8Nir8Pixel {
   }
 };
 
+
+}  // namespace
+
 std::size_t pixelBytes(UdpProfile profile) {
   switch (profile) {
     case UdpProfile::kLegacy: return LegacyPixel::kBytes;
@@ -95,8 +98,6 @@ std::size_t pixelBytes(UdpProfile profile) {
 
 bool hasSignal(UdpProfile profile) { return profile != UdpProfile::kRng15Rfl8Nir8; }
 bool hasSecondReturn(UdpProfile profile) { return profile == UdpProfile::kRng19Rfl8Sig16Nir16Dual; }
-
-}  // namespace
 
 LidarScan::LidarScan(int scan_rows, int scan_columns, UdpProfile profile)
     : rows(scan_rows), columns(scan_columns) {

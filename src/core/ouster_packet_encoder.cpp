@@ -90,18 +90,6 @@ constexpr uint32_t kRng15RangeStep = 8;     // millimetres per count
 constexpr uint32_t kRng15NearIrStep = 16;   // near-IR units per count
 constexpr uint32_t kRng15MaxNearIr = 255 * kRng15NearIrStep;
 
-std::size_t pixelBytes(UdpProfile profile) {
-  switch (profile) {
-    case UdpProfile::kLegacy: return LegacyPixel::kBytes;
-    case UdpProfile::kRng19Rfl8Sig16Nir16: return Rng19Rfl8Sig16Nir16Pixel::kBytes;
-    case UdpProfile::kRng19Rfl8Sig16Nir16Dual: return Rng19Rfl8Sig16Nir16DualPixel::kBytes;
-    case UdpProfile::kRng15Rfl8Nir8: return Rng15Rfl8Nir8Pixel::kBytes;
-  }
-  throw std::invalid_argument("unknown UDP profile");
-}
-
-bool hasSignal(UdpProfile profile) { return profile != UdpProfile::kRng15Rfl8Nir8; }
-bool hasSecondReturn(UdpProfile profile) { return profile == UdpProfile::kRng19Rfl8Sig16Nir16Dual; }
 
 uint64_t parseSerialNumber(const std::string& serial) {
   if (serial.empty()) return 0;
@@ -175,6 +163,19 @@ void quantizeForProfile(LidarScan& scan, UdpProfile profile) {
   };
   quantizeRanges(scan.range);
   quantizeRanges(scan.range2);
+  // The fields the profile carries, as the decoder sizes them.
+  const std::size_t pixels = static_cast<std::size_t>(scan.rows) * scan.columns;
+  if (hasSecondReturn(profile)) {
+    scan.range2.resize(pixels, 0);
+    scan.reflectivity2.resize(pixels, 0);
+    scan.signal2.resize(pixels, 0);
+  } else {
+    scan.range2.clear();
+    scan.reflectivity2.clear();
+    scan.signal2.clear();
+  }
+  if (hasSignal(profile)) scan.signal.resize(pixels, 0);
+  else scan.signal.clear();
   // Column fields as the decoder stores them: the profile's valid status, an
   // encoder count only in LEGACY, and nothing for columns never sent.
   const bool legacy = profile == UdpProfile::kLegacy;

@@ -195,6 +195,7 @@ int runSimulate(SimulateOptions options) {
     if (options.formats.empty()) options.formats = preset->formats;
   }
   if (options.frames <= 0) options.frames = 100;
+  if (options.formats.empty()) options.formats = options.sensor == "hdl64" ? "kitti" : "pcap";
 
   const UdpProfile profile = udpProfileFromString(options.profile);
   const Sensor sensor = makeSensor(options.sensor, profile);
@@ -329,7 +330,7 @@ int runSimulate(SimulateOptions options) {
   if (sensor.ouster) {
     io::PoseFileInfo sensor_info = pose_info;
     sensor_info.frame = "os_sensor";
-    const auto sensor_poses = io::changePoseFrame(poses, sensor.ouster->intrinsics.lidar_to_sensor.inverse());
+    const auto sensor_poses = io::changePoseFrame(poses, sensor.ouster->intrinsics.lidar_to_sensor);
     io::writeKittiPosesWithTimes((out / "poses_sensor_kitti.txt").string(), sensor_poses, sensor_info);
     io::writeTumPoses((out / "poses_sensor_tum.txt").string(), sensor_poses, sensor_info);
   }

@@ -1,0 +1,155 @@
+// rim simulate end to end: its packets decode back to exactly the simulated
+// scans, its ground truth (poses, surface) agrees with its own data, it is
+// deterministic per seed, and bad requests fail with a named error.
+#include "range_image_mapping/evaluation/surface_metrics.h"
+#include "range_image_mapping/io/kitti.h"
+#include "range_image_mapping/io/pcap_reader.h"
+#include "range_image_mapping/io/pcap_writer.h"
+#include "range_image_mapping/io/ply.h"
+#include "range_image_mapping/io/pose_file.h"
+#include "range_image_mapping/ouster_packet_encoder.h"
+#include "range_image_mapping/simulation/lidar_simulator.h"
+#include "range_image_mapping/simulation/scene_generator.h"
+#include "range_image_mapping/simulation/sensor_presets.h"
+#include "rim_command.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <filesystem>
+
+namespace range_image_mapping::simulation {
+namespace {
+
+using SimulateCommand = test::RimCommandTest;
+
+// Simulated scans of every profile, written as a pcap and read back by the
+// front end, are the simulated scans field for field.
+TEST_F(SimulateCommand, PacketsDecodeBackToTheSimulatedScansBitForBit) {
+  SceneOptions scene_options;
+  scene_options.kind = SceneKind::kIndoor;
+  const Scene scene = generateScene(scene_options);
+  const RayCaster caster(scene.mesh);
+  MotionOptions motion;
+  motion.profile = MotionProfile::kHandheld;
+  motion.duration_s = 2.0;
+  motion.sensor_height_m = 1.2;
+  const auto trajectory = makeTrajectory(scene, motion);
+  SensorEffects effects;
+  effects.range_noise_sigma_m = 0.02;
+  effects.dropout_probability = 0.05;
+  for (const UdpProfile profile : {UdpProfile::kLegacy, UdpProfile::kRng19Rfl8Sig16Nir16,
+                                   UdpProfile::kRng19Rfl8Sig16Nir16Dual, UdpProfile::kRng15Rfl8Nir8}) {
+    SCOPED_TRACE(toString(profile));
+    const OusterMetadata metadata = parseOusterMetadata(ousterLikeMetadataJson("OS-0-128", profile));
+    const auto model = std::make_shared<const LidarModel>(metadata.intrinsics);
+    const LidarSimulator simulator(model, caster, effects, 3);
+    std::vector<LidarScan> simulated;
+    {
+      io::OusterPcapWriter writer(path("capture.pcap"), metadata);
+      for (uint32_t frame = 0; frame < 3; ++frame) {
+        SimulatedScan scan = simulator.simulate(*trajectory, 0.5 + 0.1 * frame, frame);
+        quantizeForProfile(scan.raw, profile);
+        writer.writeScan(scan.raw);
+        simulated.push_back(scan.raw);
+      }
+      writer.close();
+    }
+    std::vector<LidarScan> decoded;
+    io::readOusterScans(path("capture.pcap"), metadata,
+                        [&](const LidarScan& scan) { decoded.push_back(scan); });
+    ASSERT_EQ(decoded.size(), simulated.size());
+    for (std::size_t i = 0; i < decoded.size(); ++i) {
+      EXPECT_EQ(decoded[i].frame_id, simulated[i].frame_id);
+      EXPECT_EQ(decoded[i].range, simulated[i].range);
+      EXPECT_EQ(decoded[i].reflectivity, simulated[i].reflectivity);
+      EXPECT_EQ(decoded[i].timestamp_ns, simulated[i].timestamp_ns);
+      EXPECT_EQ(decoded[i].measurement_id, simulated[i].measurement_id);
+      EXPECT_EQ(decoded[i].status, simulated[i].status);
+      EXPECT_EQ(decoded[i].encoder_count, simulated[i].encoder_count);
+      if (profile != UdpProfile::kRng15Rfl8Nir8) EXPECT_EQ(decoded[i].signal, simulated[i].signal);
+      EXPECT_GT(std::count_if(decoded[i].range.begin(), decoded[i].range.end(),
+                              [](uint32_t r) { return r != 0; }),
+                100000);
+    }
+  }
+}
+
+// Without noise or motion distortion, the decoded scans moved by the
+// ground-truth poses lie on the ground-truth surface.
+TEST_F(SimulateCommand, GroundTruthPosesPutTheScansOnTheGroundTruthSurface) {
+  const std::string out = path("run");
+  const test::RunResult run = rim("simulate --sensor OS-1-128 --scene indoor --motion cart --frames 4 "
+                                  "--noise 0 --no-motion-distortion --seed 2 --out '" + out + "'");
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  const OusterMetadata metadata = loadOusterMetadata(out + "/metadata.json");
+  const auto model = std::make_shared<const LidarModel>(metadata.intrinsics);
+  const std::vector<io::StampedPose> poses = io::readPoseFile(out + "/poses_tum.txt");
+  ASSERT_EQ(poses.size(), 4u);
+  const std::vector<Eigen::Vector3f> surface = io::readPlyPoints(out + "/surface.ply");
+  std::vector<Eigen::Vector3f> points;
+  std::size_t frame = 0;
+  io::readOusterScans(out + "/capture.pcap", metadata, [&](const LidarScan& scan) {
+    ASSERT_LT(frame, poses.size());
+    const Eigen::Isometry3f world_from_lidar = poses[frame++].pose.cast<float>();
+    for (const Eigen::Vector3f& point : toRangeImage(scan, model).unprojectAll())
+      points.push_back(world_from_lidar * point);
+  });
+  ASSERT_EQ(frame, 4u);
+  std::vector<float> distances = evaluation::nearestDistances(points, surface);
+  std::nth_element(distances.begin(), distances.begin() + distances.size() / 2, distances.end());
+  // Samples 2 cm apart: a point on the surface is within about 1.5 cm of one.
+  EXPECT_LT(distances[distances.size() / 2], 0.012f);
+  std::nth_element(distances.begin(), distances.begin() + distances.size() * 99 / 100, distances.end());
+  EXPECT_LT(distances[distances.size() * 99 / 100], 0.03f);
+  // And the sensor-frame poses are the lidar-frame poses moved by lidar_to_sensor.
+  const auto sensor_poses = io::readPoseFile(out + "/poses_sensor_tum.txt");
+  ASSERT_EQ(sensor_poses.size(), poses.size());
+  for (std::size_t i = 0; i < poses.size(); ++i)
+    EXPECT_TRUE((sensor_poses[i].pose * metadata.intrinsics.lidar_to_sensor)
+                    .isApprox(poses[i].pose, 1e-5));
+}
+
+TEST_F(SimulateCommand, SameSeedSameBytesOtherSeedOtherBytes) {
+  const std::string arguments = "simulate --sensor OS-0-128 --scene indoor --motion handheld --frames 2 ";
+  ASSERT_EQ(rim(arguments + "--seed 7 --out '" + path("a") + "'").exit_code, 0);
+  ASSERT_EQ(rim(arguments + "--seed 7 --out '" + path("b") + "'").exit_code, 0);
+  ASSERT_EQ(rim(arguments + "--seed 8 --out '" + path("c") + "'").exit_code, 0);
+  for (const char* file : {"capture.pcap", "poses_kitti.txt", "surface.ply", "scene.ply"}) {
+    EXPECT_EQ(test::readText(path("a/") + file), test::readText(path("b/") + file)) << file;
+    EXPECT_NE(test::readText(path("a/") + file), test::readText(path("c/") + file)) << file;
+  }
+}
+
+TEST_F(SimulateCommand, KittiLikeWritesVelodyneScans) {
+  const test::RunResult run =
+      rim("simulate --preset kitti_like --frames 2 --out '" + path("kitti") + "'");
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  for (const char* scan : {"000000.bin", "000001.bin"}) {
+    const PointCloudInput cloud = io::readKittiVelodyne(path("kitti/velodyne/") + scan);
+    EXPECT_GT(cloud.points.size(), 60000u) << scan;
+  }
+  EXPECT_EQ(io::readKittiPoses(path("kitti/poses_kitti.txt")).size(), 2u);
+  EXPECT_FALSE(std::filesystem::exists(path("kitti/capture.pcap")));
+}
+
+TEST_F(SimulateCommand, BadRequestsFailWithANamedError) {
+  const struct {
+    const char* arguments;
+    const char* message;
+  } cases[] = {
+      {"simulate --frames 2", "give --preset, or all of --sensor, --scene and --motion"},
+      {"simulate --preset kitti_like --formats pcap --frames 1", "needs an Ouster sensor"},
+      {"simulate --preset indoor_cart --formats tape --frames 1", "unknown format 'tape'"},
+      {"simulate --sensor OS-9 --scene indoor --motion cart --frames 1", "--sensor OS-9"},
+      {"simulate --sensor OS-0-128 --scene /nonexistent.ply --motion cart --frames 1", "nonexistent.ply"},
+  };
+  for (const auto& c : cases) {
+    const test::RunResult run = rim(std::string(c.arguments) + " --out '" + path("bad") + "'");
+    EXPECT_NE(run.exit_code, 0) << c.arguments;
+    EXPECT_NE(run.err.find(c.message), std::string::npos) << c.arguments << "\n" << run.err;
+  }
+}
+
+}  // namespace
+}  // namespace range_image_mapping::simulation
