@@ -5,6 +5,7 @@
 #include "range_image_mapping/io/kitti.h"
 #include "range_image_mapping/ouster_metadata.h"
 #include "range_image_mapping/simulation/lidar_simulator.h"
+#include "mesh_reference.h"
 #include "test_data.h"
 
 #include <gtest/gtest.h>
@@ -169,26 +170,7 @@ TEST(LidarSimulator, FloorAtKnownHeightIsExactWithOusterTables) {
 
 TEST(LidarSimulator, FloorAtKnownHeightIsExactWithHdl64) { expectExactFloor(hdl64Model()); }
 
-// Möller-Trumbore in double over every triangle.
-double bruteForceDistance(const TriangleMesh& mesh, const Eigen::Vector3d& origin, const Eigen::Vector3d& direction) {
-  double best = std::numeric_limits<double>::quiet_NaN();
-  for (const Eigen::Vector3i& t : mesh.triangles) {
-    const Eigen::Vector3d a = mesh.vertices[t[0]].cast<double>();
-    const Eigen::Vector3d edge1 = mesh.vertices[t[1]].cast<double>() - a;
-    const Eigen::Vector3d edge2 = mesh.vertices[t[2]].cast<double>() - a;
-    const Eigen::Vector3d p = direction.cross(edge2);
-    const double determinant = edge1.dot(p);
-    if (std::abs(determinant) < 1e-15) continue;
-    const Eigen::Vector3d s = origin - a;
-    const double b1 = s.dot(p) / determinant;
-    const Eigen::Vector3d q = s.cross(edge1);
-    const double b2 = direction.dot(q) / determinant;
-    if (b1 < 0 || b2 < 0 || b1 + b2 > 1) continue;
-    const double distance = edge2.dot(q) / determinant;
-    if (distance > 0 && !(distance >= best)) best = distance;
-  }
-  return best;
-}
+using test::bruteForceDistance;
 
 // A sphere (an icosphere fine enough that its facets stay within 0.13 mm of
 // the true sphere): ranges exact against the mesh, points on the sphere.

@@ -10,6 +10,7 @@
 #include "range_image_mapping/scan_batcher.h"
 #include "range_image_mapping/simulation/surface_sampler.h"
 
+#include "capture_packets.h"
 #include "test_data.h"
 
 #include <gtest/gtest.h>
@@ -30,28 +31,13 @@
 namespace range_image_mapping {
 namespace {
 
-using Packet = std::vector<uint8_t>;
+using test::Packet;
 
 // ------------------------------------------------------------ helpers
 
-std::vector<LidarScan> decodeCapture(const std::string& pcap_path, const OusterMetadata& metadata,
-                                     io::OusterPcapStatistics* statistics = nullptr) {
-  std::vector<LidarScan> scans;
-  const io::OusterPcapStatistics result =
-      io::readOusterScans(pcap_path, metadata, [&](const LidarScan& scan) { scans.push_back(scan); });
-  if (statistics != nullptr) *statistics = result;
-  return scans;
-}
 
-std::vector<Packet> lidarPackets(const std::string& pcap_path, const OusterMetadata& metadata) {
-  const std::size_t size = PacketFormat(metadata).packetSize();
-  std::vector<Packet> packets;
-  io::PcapReader reader(pcap_path);
-  io::UdpDatagram datagram;
-  while (reader.next(datagram))
-    if (datagram.size == size) packets.emplace_back(datagram.payload, datagram.payload + datagram.size);
-  return packets;
-}
+using test::decodeCapture;
+using test::lidarPackets;
 
 // Packets through a fresh batcher, as the front end reads them.
 std::vector<LidarScan> decodePackets(const std::vector<Packet>& packets, const OusterMetadata& metadata) {

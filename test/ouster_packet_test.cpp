@@ -6,6 +6,7 @@
 #include "range_image_mapping/scan_batcher.h"
 
 #include "md5.h"
+#include "capture_packets.h"
 #include "test_data.h"
 
 #include <gtest/gtest.h>
@@ -25,7 +26,7 @@ namespace range_image_mapping {
 namespace {
 
 using test::md5Hex;
-using Packet = std::vector<uint8_t>;
+using test::Packet;
 
 std::string readText(const std::string& path) {
   std::ifstream file(path);
@@ -45,25 +46,9 @@ std::string scanDigest(const std::string& digest_json, const std::string& key) {
   return digest_json.substr(open + 1, close - open - 1);
 }
 
-std::vector<LidarScan> decodeCapture(const std::string& pcap_path, const OusterMetadata& metadata,
-                                     io::OusterPcapStatistics* statistics = nullptr) {
-  std::vector<LidarScan> scans;
-  const io::OusterPcapStatistics result =
-      io::readOusterScans(pcap_path, metadata, [&](const LidarScan& scan) { scans.push_back(scan); });
-  if (statistics != nullptr) *statistics = result;
-  return scans;
-}
 
-// The lidar payloads of a capture, in order.
-std::vector<Packet> lidarPackets(const std::string& pcap_path, const OusterMetadata& metadata) {
-  const std::size_t size = PacketFormat(metadata).packetSize();
-  std::vector<Packet> packets;
-  io::PcapReader reader(pcap_path);
-  io::UdpDatagram datagram;
-  while (reader.next(datagram))
-    if (datagram.size == size) packets.emplace_back(datagram.payload, datagram.payload + datagram.size);
-  return packets;
-}
+using test::decodeCapture;
+using test::lidarPackets;
 
 std::size_t nonZero(const std::vector<uint32_t>& values) {
   return static_cast<std::size_t>(std::count_if(values.begin(), values.end(), [](uint32_t v) { return v; }));

@@ -1,5 +1,6 @@
 // Analytic primitives and Embree ray casting against exact (double) answers.
 #include "range_image_mapping/simulation/ray_caster.h"
+#include "mesh_reference.h"
 
 #include <gtest/gtest.h>
 
@@ -16,27 +17,7 @@ double floatTolerance(double distance, const Eigen::Vector3f& origin) {
   return 8.0 * std::numeric_limits<float>::epsilon() * (distance + origin.norm() + 1.0);
 }
 
-// Möller-Trumbore in double over every triangle: the reference for the caster.
-double bruteForceDistance(const TriangleMesh& mesh, const Eigen::Vector3d& origin,
-                          const Eigen::Vector3d& direction) {
-  double best = std::numeric_limits<double>::quiet_NaN();
-  for (const Eigen::Vector3i& t : mesh.triangles) {
-    const Eigen::Vector3d a = mesh.vertices[t[0]].cast<double>();
-    const Eigen::Vector3d edge1 = mesh.vertices[t[1]].cast<double>() - a;
-    const Eigen::Vector3d edge2 = mesh.vertices[t[2]].cast<double>() - a;
-    const Eigen::Vector3d p = direction.cross(edge2);
-    const double determinant = edge1.dot(p);
-    if (std::abs(determinant) < 1e-15) continue;
-    const Eigen::Vector3d s = origin - a;
-    const double b1 = s.dot(p) / determinant;
-    const Eigen::Vector3d q = s.cross(edge1);
-    const double b2 = direction.dot(q) / determinant;
-    if (b1 < 0 || b2 < 0 || b1 + b2 > 1) continue;
-    const double distance = edge2.dot(q) / determinant;
-    if (distance > 0 && !(distance >= best)) best = distance;
-  }
-  return best;
-}
+using test::bruteForceDistance;
 
 // Signed volume by the divergence theorem: positive when normals face outward.
 double signedVolume(const TriangleMesh& mesh) {

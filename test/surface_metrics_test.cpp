@@ -4,6 +4,8 @@
 #include "range_image_mapping/io/ply.h"
 #include "range_image_mapping/simulation/surface_sampler.h"
 
+#include "error_text.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -23,17 +25,8 @@ std::string temporaryPath(const std::string& name) {
   return (std::filesystem::temp_directory_path() / ("rim_surface_metrics_test_" + name)).string();
 }
 
-template <typename Function>
-std::string errorOf(Function&& function) {
-  try {
-    function();
-  } catch (const std::exception& error) { return error.what(); }
-  return "no exception";
-}
-
-bool contains(const std::string& text, const std::string& part) {
-  return text.find(part) != std::string::npos;
-}
+using test::contains;
+using test::errorOf;
 
 // A width x depth rectangle in the plane z = height.
 TriangleMesh plane(float width, float depth, float height) {

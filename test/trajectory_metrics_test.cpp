@@ -2,6 +2,7 @@
 
 #include "range_image_mapping/io/kitti.h"
 #include "range_image_mapping/io/pose_file.h"
+#include "error_text.h"
 #include "test_data.h"
 
 #include <gtest/gtest.h>
@@ -23,17 +24,8 @@ std::string temporaryPath(const std::string& name) {
 
 void writeFile(const std::string& path, const std::string& text) { std::ofstream(path) << text; }
 
-template <typename Function>
-std::string errorOf(Function&& function) {
-  try {
-    function();
-  } catch (const std::exception& error) { return error.what(); }
-  return "no exception";
-}
-
-bool contains(const std::string& text, const std::string& part) {
-  return text.find(part) != std::string::npos;
-}
+using test::contains;
+using test::errorOf;
 
 Eigen::Isometry3d pose(double yaw, const Eigen::Vector3d& position) {
   Eigen::Isometry3d result = Eigen::Isometry3d::Identity();
