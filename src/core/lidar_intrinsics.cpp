@@ -330,7 +330,7 @@ void LidarModel::projectMany(const Eigen::Vector3f* points, std::size_t count, P
   constexpr std::size_t kBlock = 256;
   alignas(32) float x[kBlock], y[kBlock], rho_squared[kBlock], rho[kBlock], dz[kBlock];
   alignas(32) float sin_elevation[kBlock], offset_cos[kBlock], offset_sin[kBlock], offset[kBlock];
-  alignas(32) float sin_delta[kBlock], ray_length[kBlock], encoder_angle[kBlock];
+  alignas(32) float ray_length[kBlock], encoder_angle[kBlock];
   alignas(32) int row[kBlock];
   const float r0 = beam_origin_radius_;
   const float nearest_rho = kNearestAxisDistance * r0;
@@ -360,7 +360,6 @@ void LidarModel::projectMany(const Eigen::Vector3f* points, std::size_t count, P
     for (std::size_t i = 0; i < n; ++i) {  // vectorised
       const BeamOriginCorrection correction =
           correctForBeamOrigin(rho_squared[i], rho[i], dz[i], r0, offset_cos[i], offset_sin[i]);
-      sin_delta[i] = correction.sin_delta;
       ray_length[i] = correction.ray_length;
       sin_elevation[i] = dz[i] / correction.ray_length;
       encoder_angle[i] = encoderAngleOf(x[i], y[i], offset[i], correction.sin_delta);

@@ -10,6 +10,7 @@ int main(int argc, char** argv) {
   range_image_mapping::tool::addDecodeCommand(app);
   range_image_mapping::tool::addSimulateCommand(app);
   range_image_mapping::tool::addEvalCommand(app);
+  range_image_mapping::tool::addOdometryCommand(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::RuntimeError& error) {  // a command that ran and failed

@@ -1,6 +1,7 @@
 // rim simulate: a spinning LiDAR driven through a mesh scene, written as the
 // real sensor's data (pcap, bags, KITTI folders) with exact ground truth.
 #include "commands.h"
+#include "progress.h"
 
 #include "range_image_mapping/io/kitti.h"
 #include "range_image_mapping/io/mesh_file.h"
@@ -161,21 +162,6 @@ std::set<std::string> parseFormats(const std::string& text, const Sensor& sensor
     formats.insert(format);
   }
   return formats;
-}
-
-// Progress on one line of stderr, with frames per second and time left,
-// redrawn at most five times a second.
-void showProgress(int done, int total, std::chrono::steady_clock::time_point start) {
-  static double last_drawn = -1.0;
-  const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  if (done < total && elapsed - last_drawn < 0.2) return;
-  last_drawn = elapsed;
-  const double rate = done / std::max(elapsed, 1e-9);
-  const int width = 30, filled = total ? width * done / total : width;
-  std::fprintf(stderr, "\r[%.*s%*s] %d/%d frames, %.1f frames/s, %.0f s left ", filled,
-               "##############################", width - filled, "", done, total, rate,
-               (total - done) / std::max(rate, 1e-9));
-  if (done == total) std::fprintf(stderr, "\n");
 }
 
 int runSimulate(SimulateOptions options) {

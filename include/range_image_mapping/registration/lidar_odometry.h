@@ -1,0 +1,101 @@
+// Frame-to-frame (or frame-to-keyframe) LiDAR odometry on range images, beyond
+// the paper: constant-velocity prior, per-column deskew, degeneracy fallback,
+// covariance, keyframes, resets on time jumps.
+#pragma once
+
+#include "range_image_mapping/registration/projective_icp.h"
+
+#include <Eigen/Geometry>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace range_image_mapping::registration {
+
+struct OdometryOptions {
+  RegistrationOptions registration;
+  bool deskew = true;
+  bool constant_velocity_prior = true;
+  // Degenerate when the hessian's condition number exceeds this or fewer pairs
+  // than min_inliers remain: the motion prior is used instead, and reported.
+  double max_condition_number = 1e6;
+  std::size_t min_inliers = 200;
+  // Keyframes: 0 = always register to the previous frame.
+  double keyframe_distance_m = 0.0;
+  double keyframe_angle_rad = 0.0;
+  // A scan more than this after the previous one, or before it, resets the odometry.
+  double max_time_gap_s = 1.0;
+};
+
+struct OdometryUpdate {
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();  // T_odom_lidar at the scan time
+  // Of the registration T_target_scan (the target is the previous scan unless
+  // keyframes are on), as a perturbation exp(delta) T_target_scan in the
+  // target's lidar frame, order [rotation, translation]:
+  // the inverse hessian scaled by the residual variance. Identity (1 rad^2,
+  // 1 m^2: unknown) on a reset, a skipped or a degenerate scan.
+  Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Identity();
+  Eigen::Vector3d linear_velocity = Eigen::Vector3d::Zero();   // lidar frame, m/s
+  Eigen::Vector3d angular_velocity = Eigen::Vector3d::Zero();  // lidar frame, rad/s
+  uint64_t stamp_ns = 0;     // scan time: the pose's and the deskewed points' time
+  std::size_t inliers = 0;
+  int iterations = 0;
+  double condition_number = 0.0;  // of the last hessian
+  double residual_rms_m = 0.0;
+  bool degenerate = false;   // the motion prior was used
+  bool reset = false;        // this scan started a new odometry (first scan, time jump)
+  bool skipped = false;      // the scan was not used (empty, all invalid, same stamp)
+  std::string warning;       // why a scan was skipped, reset or degenerate; empty if none
+  double seconds = 0.0;      // wall time of this step
+};
+
+// Scan time: the image's stamp_ns, or its first valid column's timestamp when
+// the stamp is 0. Each column's points are moved to that time with the
+// constant-velocity motion T(t) = exp((t - t0) * twist) (body-frame twist of
+// the last registered step); columns without a timestamp are left in place.
+// After registration the scan is deskewed again with the new velocity, and
+// is the next target (its pyramid's points moved and filed under the pixels
+// they now project to, their coordinates kept exact).
+class LidarOdometry {
+ public:
+  explicit LidarOdometry(OdometryOptions options = {});
+  // Never returns a non-finite pose: bad scans (empty, all invalid, identical,
+  // out of order) are reported in `warning` and leave the pose unchanged. A
+  // scan before the previous one or more than max_time_gap_s after it
+  // restarts the odometry from the current pose (velocity zero, new target).
+  OdometryUpdate process(const RangeImage& scan);
+  // Forgets everything: the next scan starts at the identity.
+  void reset();
+  const Eigen::Isometry3d& pose() const { return pose_; }
+  const OdometryOptions& options() const { return options_; }
+  // The last used scan's points and normals, deskewed to its scan time (lidar
+  // frame, NaN where invalid); e.g. for publishing the deskewed cloud.
+  const VertexNormalMap& deskewedScan() const { return deskewed_; }
+
+ private:
+  void restart(const RangeImage& scan, uint64_t stamp_ns);
+  // Fills column_motion_; false when there is nothing to move (no twist, no column times).
+  bool computeColumnMotion(const RangeImage& scan, uint64_t stamp_ns, const Eigen::Matrix<double, 6, 1>& twist);
+  void moveColumns(const VertexNormalMap& measured, VertexNormalMap& moved) const;
+  // deskewed_ from measured_ (which must hold the scan's map).
+  void deskew(const RangeImage& scan, uint64_t stamp_ns, const Eigen::Matrix<double, 6, 1>& twist);
+  void makeTarget(const RangeImage& scan, bool deskewed);
+
+  OdometryOptions options_;
+  ProjectiveIcp icp_;
+  Eigen::Isometry3d pose_ = Eigen::Isometry3d::Identity();       // T_odom_lidar, last scan
+  Eigen::Isometry3d keyframe_pose_ = Eigen::Isometry3d::Identity();  // T_odom_target
+  Eigen::Matrix<double, 6, 1> twist_ = Eigen::Matrix<double, 6, 1>::Zero();  // [angular, linear], body frame
+  bool has_target_ = false;
+  uint64_t last_stamp_ns_ = 0;
+  // Reused buffers: the scan's points as measured, deskewed, and the target.
+  VertexNormalMap measured_, deskewed_;
+  std::vector<Eigen::Matrix<float, 3, 4>> column_motion_;  // per column: [R | t] to the scan time
+  std::vector<ProjectedPixel> pixels_;  // target points re-filed by pixel
+  std::vector<uint8_t> hits_;
+  VertexNormalMap filed_;
+  RangeImage staggered_;  // destaggered input, re-staggered
+};
+
+}  // namespace range_image_mapping::registration

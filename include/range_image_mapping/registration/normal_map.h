@@ -1,0 +1,56 @@
+// Points and normals of a range image, computed in the image domain at any
+// pyramid level (a strided view of the full image; no copies of the ranges).
+#pragma once
+
+#include "range_image_mapping/range_image.h"
+
+#include <vector>
+
+namespace range_image_mapping::registration {
+
+enum class NormalMethod {
+  kCrossProduct,  // neighbouring pixels (right/left and up/down), Behley & Stachniss style
+  kCovariance,    // smallest eigenvector of a small window's covariance
+};
+
+struct NormalMapOptions {
+  NormalMethod method = NormalMethod::kCrossProduct;
+  int window_radius = 1;  // kCovariance: (2r+1)^2 pixels of the level
+  // A neighbour whose range differs from the pixel's by more than this
+  // fraction of the pixel's range, per full-resolution pixel between them
+  // (so s times more at level s), is across a depth discontinuity: the pixel
+  // sits on an edge and gets no normal.
+  float max_range_jump_ratio = 0.1f;
+};
+
+// Level `stride` of an image: pixel (i, j) is full-resolution pixel
+// (stride * i, stride * j). Invalid points and normals are NaN: a pixel
+// without a return has neither; a pixel on a depth edge or without enough
+// neighbours has its point but no normal. Normals are unit length and face
+// the sensor. Columns wrap around (the image is a cylinder); rows do not.
+struct VertexNormalMap {
+  int rows = 0, columns = 0, stride = 1;
+  std::vector<Eigen::Vector3f> points;   // lidar frame
+  std::vector<Eigen::Vector3f> normals;
+  const Eigen::Vector3f& point(int row, int column) const { return points[std::size_t(row) * columns + column]; }
+  const Eigen::Vector3f& normal(int row, int column) const { return normals[std::size_t(row) * columns + column]; }
+};
+
+// Nearest pixel of a level to a full-resolution pixel (level pixel (i, j) is
+// full pixel (s i, s j)): columns wrap (column W is column 0), rows clamp.
+inline std::size_t levelPixelIndex(const VertexNormalMap& level, const ProjectedPixel& pixel) {
+  const int s = level.stride;
+  int row = (pixel.row + s / 2) / s;
+  if (row >= level.rows) row = level.rows - 1;
+  int column = (pixel.column + s / 2) / s;
+  if (column >= level.columns) column = 0;
+  return std::size_t(row) * level.columns + column;
+}
+
+// Reuses out's buffers. The image must be staggered; throws
+// std::invalid_argument for a missing model, wrong sizes, a destaggered image,
+// stride < 1 or bad options. Parallel over rows (TBB).
+void computeVertexNormalMap(const RangeImage& image, int stride, const NormalMapOptions& options,
+                            VertexNormalMap& out);
+
+}  // namespace range_image_mapping::registration

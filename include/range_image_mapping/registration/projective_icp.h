@@ -1,0 +1,90 @@
+// Multi-scale projective point-to-plane registration (paper section 4.1):
+// source points are projected with Pi into the target range image, and the
+// target point and normal found there form the pair. No k-d tree.
+#pragma once
+
+#include "range_image_mapping/registration/normal_map.h"
+
+#include <Eigen/Geometry>
+
+#include <vector>
+
+namespace range_image_mapping::registration {
+
+struct RobustKernel {
+  enum class Type { kPseudoHuber, kBarron } type = Type::kPseudoHuber;
+  double scale_m = 0.5;  // paper: 0.5 m outdoors, 0.2 m indoors
+  double alpha = 1.0;    // Barron's shape (1: pseudo-Huber/Charbonnier, 0: Cauchy, -2: Geman-McClure)
+};
+
+// Weight of a residual in iteratively reweighted least squares, rho'(e)/e up
+// to a constant: pseudo-Huber 1/sqrt(1+(e/c)^2); Barron's general kernel
+// ((e/c)^2/|alpha-2| + 1)^(alpha/2-1) (alpha 2: least squares, 0: Cauchy).
+double robustWeight(const RobustKernel& kernel, double residual_m);
+
+struct RegistrationOptions {
+  std::vector<int> strides{4, 2, 1};        // pyramid levels, coarse to fine
+  std::vector<int> iterations{20, 20, 10};  // Gauss-Newton iterations per level (paper)
+  int source_stride = 1;                    // extra subsampling of the source at every level
+  double max_correspondence_distance_m = 1.0;
+  double min_normal_cosine = 0.8;           // source and target normals must agree
+  RobustKernel kernel;
+  NormalMapOptions normals;
+  double convergence_rotation_rad = 1e-5;   // early exit when an update is smaller
+  double convergence_translation_m = 1e-5;
+  // Levels before the last stop when an update is below the thresholds times
+  // this times their stride (they only seed the finer levels).
+  double coarse_convergence_scale = 100.0;
+};
+
+struct RegistrationResult {
+  Eigen::Isometry3d target_from_source = Eigen::Isometry3d::Identity();
+  // J^T W J of the last iteration, unknowns [rotation, translation] (a left
+  // perturbation T <- Exp(delta) T in the target frame).
+  Eigen::Matrix<double, 6, 6> hessian = Eigen::Matrix<double, 6, 6>::Zero();
+  std::size_t inliers = 0;       // pairs in the last iteration
+  int iterations = 0;            // over all levels
+  double condition_number = 0;   // of the hessian; infinity when it is singular (no pairs)
+  double residual_rms_m = 0;
+};
+
+// The target's vertex/normal maps are built once per target and reused.
+// align() reuses internal buffers: one instance must not align from several
+// threads at once (each call is parallel inside, with TBB).
+class ProjectiveIcp {
+ public:
+  // Throws std::invalid_argument for inconsistent options (strides and
+  // iterations of different lengths, stride < 1, non-positive gates or scale).
+  explicit ProjectiveIcp(RegistrationOptions options = {});
+
+  // Prepares the target pyramid (normals at every level) from strided views
+  // of the image; the image itself is not kept. Throws std::invalid_argument
+  // for an image without a model or destaggered.
+  void setTarget(const RangeImage& target);
+  bool hasTarget() const { return target_model_ != nullptr; }
+  const VertexNormalMap& targetLevel(std::size_t level) const { return target_levels_.at(level); }
+  // For callers that move the target's points after setTarget (deskewing):
+  // each point must stay filed under the level pixel it projects to
+  // (levelPixelIndex), or association will not find it.
+  VertexNormalMap& targetLevel(std::size_t level) { return target_levels_.at(level); }
+  // Source points in their own lidar frame (e.g. deskewed), with normals;
+  // pixels without a normal are not used. At level s the source is read every
+  // s * source_stride pixels. Throws std::runtime_error without a target,
+  // std::invalid_argument for a non-finite initial pose.
+  RegistrationResult align(const VertexNormalMap& source_full_resolution,
+                           const Eigen::Isometry3d& initial_target_from_source) const;
+  // Convenience: computes the source map itself.
+  RegistrationResult align(const RangeImage& source, const Eigen::Isometry3d& initial_target_from_source) const;
+
+  const RegistrationOptions& options() const { return options_; }
+
+ private:
+  RegistrationOptions options_;
+  LidarModelConstPtr target_model_;
+  std::vector<VertexNormalMap> target_levels_;  // one per options_.strides entry
+  // Reused between calls (no per-frame allocation in steady state).
+  mutable VertexNormalMap source_map_;
+  mutable std::vector<Eigen::Vector3f> source_points_, source_normals_;
+};
+
+}  // namespace range_image_mapping::registration

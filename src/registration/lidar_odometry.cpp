@@ -1,0 +1,287 @@
+#include "range_image_mapping/registration/lidar_odometry.h"
+
+#include <Eigen/LU>
+#include <tbb/parallel_for.h>
+
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+namespace range_image_mapping::registration {
+namespace {
+
+using Vector6d = Eigen::Matrix<double, 6, 1>;
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
+
+Eigen::Matrix3d skew(const Eigen::Vector3d& v) {
+  Eigen::Matrix3d m;
+  m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+  return m;
+}
+
+// SE(3) exponential of a twist [angular, linear]: the pose reached after one
+// unit of time at that constant body-frame velocity.
+Eigen::Isometry3d exponential(const Vector6d& twist) {
+  const Eigen::Vector3d omega = twist.head<3>(), v = twist.tail<3>();
+  const double angle = omega.norm();
+  const Eigen::Matrix3d w = skew(omega);
+  Eigen::Matrix3d left_jacobian = Eigen::Matrix3d::Identity();
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  if (angle < 1e-9) {
+    left_jacobian += 0.5 * w;
+    pose.linear() = Eigen::Matrix3d::Identity() + w;
+  } else {
+    left_jacobian += (1.0 - std::cos(angle)) / (angle * angle) * w +
+                     (angle - std::sin(angle)) / (angle * angle * angle) * w * w;
+    pose.linear() = Eigen::AngleAxisd(angle, omega / angle).toRotationMatrix();
+  }
+  pose.translation() = left_jacobian * v;
+  return pose;
+}
+
+// Inverse of exponential() for rotations below pi.
+Vector6d logarithm(const Eigen::Isometry3d& pose) {
+  const Eigen::AngleAxisd rotation(pose.linear());
+  const Eigen::Vector3d omega = rotation.angle() * rotation.axis();
+  const double angle = rotation.angle();
+  const Eigen::Matrix3d w = skew(omega);
+  Eigen::Matrix3d inverse_left_jacobian = Eigen::Matrix3d::Identity() - 0.5 * w;
+  if (angle > 1e-9)
+    inverse_left_jacobian += (1.0 - angle * std::sin(angle) / (2.0 * (1.0 - std::cos(angle)))) /
+                             (angle * angle) * w * w;
+  Vector6d twist;
+  twist << omega, inverse_left_jacobian * pose.translation();
+  return twist;
+}
+
+bool isFinite(const Eigen::Isometry3d& pose) { return pose.matrix().allFinite(); }
+
+// First column with a nonzero timestamp that holds a valid range.
+uint64_t firstValidColumnTimestamp(const RangeImage& scan) {
+  if (scan.column_timestamp_ns.size() != std::size_t(scan.columns())) return 0;
+  for (int u = 0; u < scan.columns(); ++u) {
+    if (scan.column_timestamp_ns[u] == 0) continue;
+    for (int v = 0; v < scan.rows(); ++v)
+      if (scan.valid(v, u)) return scan.column_timestamp_ns[u];
+  }
+  return 0;
+}
+
+std::string seconds(double value) {
+  std::ostringstream text;
+  text.precision(3);
+  text << value << " s";
+  return text.str();
+}
+
+}  // namespace
+
+LidarOdometry::LidarOdometry(OdometryOptions options)
+    : options_(std::move(options)), icp_(options_.registration) {
+  if (!(options_.max_time_gap_s > 0.0))
+    throw std::invalid_argument("odometry: max_time_gap_s must be positive, not " +
+                                std::to_string(options_.max_time_gap_s));
+  if (!(options_.max_condition_number > 1.0))
+    throw std::invalid_argument("odometry: max_condition_number must be above 1, not " +
+                                std::to_string(options_.max_condition_number));
+  if (options_.keyframe_distance_m < 0.0 || options_.keyframe_angle_rad < 0.0)
+    throw std::invalid_argument("odometry: keyframe distance and angle must not be negative");
+}
+
+void LidarOdometry::reset() {
+  pose_ = keyframe_pose_ = Eigen::Isometry3d::Identity();
+  twist_.setZero();
+  has_target_ = false;
+  last_stamp_ns_ = 0;
+}
+
+OdometryUpdate LidarOdometry::process(const RangeImage& input) {
+  const auto started = std::chrono::steady_clock::now();
+  OdometryUpdate update;
+  const auto finish = [&]() {
+    update.pose = pose_;
+    update.angular_velocity = twist_.head<3>();
+    update.linear_velocity = twist_.tail<3>();
+    update.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+    return update;
+  };
+  const auto skip = [&](const std::string& why) {
+    update.skipped = true;
+    update.warning = why + ": scan skipped";
+    return finish();
+  };
+
+  // Scans that cannot be registered leave everything as it was.
+  if (!input.model || input.rows() == 0 || input.columns() == 0 || input.range.empty())
+    return skip("empty range image");
+  if (input.range.size() != std::size_t(input.rows()) * input.columns())
+    return skip("range image with " + std::to_string(input.range.size()) + " ranges for a " +
+                std::to_string(input.rows()) + " x " + std::to_string(input.columns()) + " model");
+  const RangeImage& scan = input.column_order == ColumnOrder::kStaggered ? input : (staggered_ = input.staggered());
+  if (scan.validCount() == 0) return skip("range image without a single valid range");
+  const uint64_t stamp = scan.stamp_ns != 0 ? scan.stamp_ns : firstValidColumnTimestamp(scan);
+  update.stamp_ns = stamp;
+
+  if (!has_target_) {
+    restart(scan, stamp);
+    update.reset = true;
+    return finish();
+  }
+  if (stamp == last_stamp_ns_) return skip("same stamp as the previous scan (" + std::to_string(stamp) + " ns)");
+  if (stamp < last_stamp_ns_ ||
+      double(stamp - last_stamp_ns_) * 1e-9 > options_.max_time_gap_s) {
+    update.warning = stamp < last_stamp_ns_
+                         ? "time went back by " + seconds(double(last_stamp_ns_ - stamp) * 1e-9)
+                         : seconds(double(stamp - last_stamp_ns_) * 1e-9) + " since the previous scan (more than " +
+                               seconds(options_.max_time_gap_s) + ")";
+    update.warning += ": odometry restarted from the current pose";
+    restart(scan, stamp);
+    update.reset = true;
+    return finish();
+  }
+  const double dt = double(stamp - last_stamp_ns_) * 1e-9;
+
+  // Constant-velocity prior, deskewed source, registration to the target.
+  const Vector6d prior_twist = options_.constant_velocity_prior ? twist_ : Vector6d::Zero();
+  const Eigen::Isometry3d prior_step = exponential(dt * prior_twist);  // T_previous_current
+  const Eigen::Isometry3d target_from_previous = keyframe_pose_.inverse() * pose_;
+  const Eigen::Isometry3d guess = target_from_previous * prior_step;
+  computeVertexNormalMap(scan, 1, options_.registration.normals, measured_);
+  deskew(scan, stamp, options_.deskew ? prior_twist : Vector6d::Zero());
+  const RegistrationResult result = icp_.align(deskewed_, guess);
+  update.inliers = result.inliers;
+  update.iterations = result.iterations;
+  update.condition_number = result.condition_number;
+  update.residual_rms_m = result.residual_rms_m;
+
+  std::string degeneracy;
+  if (!isFinite(result.target_from_source))
+    degeneracy = "registration gave a non-finite pose";
+  else if (result.inliers < options_.min_inliers)
+    degeneracy = std::to_string(result.inliers) + " pairs (fewer than " + std::to_string(options_.min_inliers) + ")";
+  else if (!(result.condition_number <= options_.max_condition_number))
+    degeneracy = "condition number " + std::to_string(result.condition_number) + " (above " +
+                 std::to_string(options_.max_condition_number) + ")";
+  Eigen::Isometry3d target_from_current = result.target_from_source;
+  if (!degeneracy.empty()) {
+    update.degenerate = true;
+    update.warning = "degenerate registration, " + degeneracy + ": motion prior used";
+    target_from_current = guess;
+  } else {
+    const std::size_t degrees_of_freedom = std::max<std::size_t>(result.inliers, 7) - 6;
+    const double variance = result.residual_rms_m * result.residual_rms_m * double(result.inliers) /
+                            double(degrees_of_freedom);
+    const Eigen::FullPivLU<Matrix6d> hessian(result.hessian);
+    if (hessian.isInvertible()) {
+      const Matrix6d covariance = variance * hessian.inverse();
+      if (covariance.allFinite()) update.covariance = 0.5 * (covariance + covariance.transpose());
+    }
+  }
+  const Eigen::Isometry3d pose = keyframe_pose_ * target_from_current;
+  if (!update.degenerate) twist_ = logarithm(pose_.inverse() * pose) / dt;
+  pose_ = pose;
+  last_stamp_ns_ = stamp;
+
+  // The next target: this scan deskewed with the velocity just estimated.
+  const bool deskewed = options_.deskew && computeColumnMotion(scan, stamp, twist_);
+  if (deskewed) moveColumns(measured_, deskewed_);
+  const Eigen::Isometry3d from_keyframe = keyframe_pose_.inverse() * pose_;
+  const bool keyframes = options_.keyframe_distance_m > 0.0 || options_.keyframe_angle_rad > 0.0;
+  const bool new_keyframe =
+      !keyframes ||
+      (options_.keyframe_distance_m > 0.0 && from_keyframe.translation().norm() >= options_.keyframe_distance_m) ||
+      (options_.keyframe_angle_rad > 0.0 &&
+       Eigen::AngleAxisd(from_keyframe.linear()).angle() >= options_.keyframe_angle_rad);
+  if (new_keyframe) {
+    makeTarget(scan, deskewed);
+    keyframe_pose_ = pose_;
+  }
+  return finish();
+}
+
+void LidarOdometry::restart(const RangeImage& scan, uint64_t stamp_ns) {
+  twist_.setZero();
+  computeVertexNormalMap(scan, 1, options_.registration.normals, measured_);
+  deskewed_ = measured_;
+  makeTarget(scan, false);
+  keyframe_pose_ = pose_;
+  last_stamp_ns_ = stamp_ns;
+  has_target_ = true;
+}
+
+bool LidarOdometry::computeColumnMotion(const RangeImage& scan, uint64_t stamp_ns, const Vector6d& twist) {
+  const int columns = scan.columns();
+  if (twist.isZero() || scan.column_timestamp_ns.size() != std::size_t(columns)) return false;
+  column_motion_.resize(columns);
+  for (int u = 0; u < columns; ++u) {
+    const uint64_t time = scan.column_timestamp_ns[u];
+    const double offset = time == 0 ? 0.0 : (double(time) - double(stamp_ns)) * 1e-9;
+    column_motion_[u] = exponential(offset * twist).matrix().topRows<3>().cast<float>();
+  }
+  return true;
+}
+
+// Each column's points and normals, measured at the column's time, moved into
+// the lidar frame at the scan time: p0 = exp((t - t0) * twist) * p. Pixel
+// (i, j) of a level of stride s is full-resolution column s * j.
+void LidarOdometry::moveColumns(const VertexNormalMap& measured, VertexNormalMap& moved) const {
+  if (&moved != &measured) {
+    moved.rows = measured.rows;
+    moved.columns = measured.columns;
+    moved.stride = measured.stride;
+    moved.points.resize(measured.points.size());
+    moved.normals.resize(measured.normals.size());
+  }
+  tbb::parallel_for(tbb::blocked_range<int>(0, measured.rows), [&](const tbb::blocked_range<int>& rows) {
+    for (int v = rows.begin(); v < rows.end(); ++v)
+      for (int u = 0; u < measured.columns; ++u) {
+        const std::size_t i = std::size_t(v) * measured.columns + u;
+        const Eigen::Matrix<float, 3, 4>& motion = column_motion_[std::size_t(u) * measured.stride];
+        moved.points[i] = motion.leftCols<3>() * measured.points[i] + motion.col(3);
+        moved.normals[i] = motion.leftCols<3>() * measured.normals[i];
+      }
+  });
+}
+
+void LidarOdometry::deskew(const RangeImage& scan, uint64_t stamp_ns, const Vector6d& twist) {
+  if (computeColumnMotion(scan, stamp_ns, twist))
+    moveColumns(measured_, deskewed_);
+  else
+    deskewed_ = measured_;
+}
+
+void LidarOdometry::makeTarget(const RangeImage& scan, bool deskewed) {
+  icp_.setTarget(scan);
+  if (!deskewed) return;
+  // The target pyramid deskewed point by point, then filed under the pixel
+  // each moved point projects to (nearest first), so that projective
+  // association finds it where it now is. Re-projecting ranges instead would
+  // snap every point onto its pixel's ray, centimetres off at range.
+  const LidarModel& model = *scan.model;
+  for (std::size_t level = 0; level < options_.registration.strides.size(); ++level) {
+    VertexNormalMap& map = icp_.targetLevel(level);
+    moveColumns(map, map);
+    const std::size_t size = map.points.size();
+    pixels_.resize(size);
+    hits_.resize(size);
+    model.projectMany(map.points.data(), size, pixels_.data(), hits_.data());
+    filed_.rows = map.rows;
+    filed_.columns = map.columns;
+    filed_.stride = map.stride;
+    filed_.points.assign(size, Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN()));
+    filed_.normals.assign(size, Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN()));
+    for (std::size_t i = 0; i < size; ++i) {
+      if (!hits_[i]) continue;
+      const std::size_t t = levelPixelIndex(map, pixels_[i]);  // where the ICP will look
+      if (std::isfinite(filed_.points[t].x()) &&
+          filed_.points[t].squaredNorm() <= map.points[i].squaredNorm())
+        continue;
+      filed_.points[t] = map.points[i];
+      filed_.normals[t] = map.normals[i];
+    }
+    std::swap(map, filed_);
+  }
+}
+
+}  // namespace range_image_mapping::registration

@@ -1,0 +1,67 @@
+// rim odometry end to end: a short simulated sequence (from rim simulate)
+// comes out within centimetres of its ground truth, in both pose formats
+// with per-frame statistics, and bad requests fail with a named error.
+#include "range_image_mapping/evaluation/trajectory_metrics.h"
+#include "range_image_mapping/io/pose_file.h"
+#include "rim_command.h"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+namespace range_image_mapping {
+namespace {
+
+using OdometryCommand = test::RimCommandTest;
+
+std::vector<Eigen::Isometry3d> posesOf(const std::vector<io::StampedPose>& stamped) {
+  std::vector<Eigen::Isometry3d> poses;
+  for (const io::StampedPose& pose : stamped) poses.push_back(pose.pose);
+  return poses;
+}
+
+TEST_F(OdometryCommand, IndoorCartComesOutWithinTwoCentimetres) {
+  ASSERT_EQ(rim("simulate --preset indoor_cart --frames 15 --out " + path("ic")).exit_code, 0);
+  const test::RunResult run = rim("odometry " + path("ic") + " --kernel-scale 0.2 --out " + path("ic/est.txt"));
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  EXPECT_NE(run.err.find("15/15 frames"), std::string::npos) << run.err;  // the progress bar
+  const auto estimate = io::readKittiPosesWithTimes(path("ic/est.txt"));
+  const auto tum = io::readTumPoses(path("ic/est_tum.txt"));
+  const auto truth = io::readKittiPosesWithTimes(path("ic/poses_kitti.txt"));
+  ASSERT_EQ(estimate.size(), 15u);
+  ASSERT_EQ(tum.size(), 15u);
+  ASSERT_EQ(truth.size(), 15u);
+  for (std::size_t k = 0; k < estimate.size(); ++k) {
+    EXPECT_NEAR(estimate[k].time_s, truth[k].time_s, 1e-6);
+    EXPECT_TRUE(estimate[k].pose.isApprox(tum[k].pose, 1e-6));
+  }
+  const auto result = evaluation::evaluateTrajectory(posesOf(estimate), posesOf(truth));
+  EXPECT_LT(result.absolute_translation_m.maximum, 0.02);  // measured about 5 mm
+  // One CSV line per scan after the header.
+  std::ifstream csv(path("ic/est_frames.csv"));
+  int lines = 0;
+  for (std::string line; std::getline(csv, line);) ++lines;
+  EXPECT_EQ(lines, 16);
+  EXPECT_NE(test::readText(path("ic/est_summary.json")).find("\"degenerate\" : 0"), std::string::npos);
+
+  // Sensor-frame poses are the lidar poses moved by lidar_to_sensor.
+  ASSERT_EQ(rim("odometry " + path("ic") + " --frames 3 --frame sensor --out " + path("ic/sensor.txt")).exit_code, 0);
+  EXPECT_EQ(io::readKittiPosesWithTimes(path("ic/sensor.txt")).size(), 3u);
+}
+
+TEST_F(OdometryCommand, BadRequestsNameTheProblem) {
+  test::RunResult run = rim("odometry " + path("missing") + " --out " + path("est.txt"));
+  EXPECT_NE(run.exit_code, 0);
+  EXPECT_NE(run.err.find("does not exist"), std::string::npos) << run.err;
+  std::ofstream(path("capture.pcap")) << "not a capture";
+  run = rim("odometry " + path("capture.pcap") + " --out " + path("est.txt"));
+  EXPECT_NE(run.exit_code, 0);
+  EXPECT_NE(run.err.find("--metadata"), std::string::npos) << run.err;
+  std::filesystem::create_directories(path("empty/velodyne"));
+  run = rim("odometry " + path("empty") + " --out " + path("est.txt"));
+  EXPECT_NE(run.exit_code, 0);
+  EXPECT_NE(run.err.find("no KITTI scans"), std::string::npos) << run.err;
+}
+
+}  // namespace
+}  // namespace range_image_mapping

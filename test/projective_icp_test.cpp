@@ -1,0 +1,272 @@
+// Projective ICP against exact answers: simulated pairs in generated scenes
+// (the simulator's poses are the truth), real KITTI 94 -> 95 against the
+// KITTI ground truth, real Ouster lb_n3 frames against the reference poses,
+// and degenerate or empty input.
+#include "range_image_mapping/io/kitti.h"
+#include "range_image_mapping/io/pcap_reader.h"
+#include "range_image_mapping/ouster_packet.h"
+#include "range_image_mapping/registration/projective_icp.h"
+#include "range_image_mapping/simulation/lidar_simulator.h"
+#include "range_image_mapping/simulation/scene_generator.h"
+#include "range_image_mapping/simulation/sensor_presets.h"
+#include "test_data.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+
+namespace range_image_mapping::registration {
+namespace {
+
+constexpr double kDegree = M_PI / 180.0;
+
+struct PoseError {
+  double translation_m, rotation_deg;
+};
+PoseError poseError(const Eigen::Isometry3d& estimate, const Eigen::Isometry3d& truth) {
+  const Eigen::Isometry3d error = truth.inverse() * estimate;
+  return {error.translation().norm(), Eigen::AngleAxisd(error.linear()).angle() / kDegree};
+}
+
+LidarModelConstPtr ousterLikeModel(const char* product) {
+  return std::make_shared<const LidarModel>(
+      parseOusterMetadata(simulation::ousterLikeMetadataJson(product, UdpProfile::kRng19Rfl8Sig16Nir16)).intrinsics);
+}
+
+// ------------------------------------------------------------ simulated pairs
+
+struct SimulatedPair {
+  const char* name;
+  simulation::SceneKind kind;
+  const char* product;
+  double sensor_height_m;
+  double forward_m, sideways_m, yaw_deg, roll_deg;
+  double noise_sigma_m;
+  double kernel_scale_m;  // paper: 0.5 m outdoors, 0.2 m indoors
+};
+
+void PrintTo(const SimulatedPair& pair, std::ostream* out) { *out << pair.name; }
+
+class SimulatedRegistration : public ::testing::TestWithParam<SimulatedPair> {};
+
+// The pose of the sensor `along` metres down the route from its first point,
+// looking along it, `height` above the ground.
+Eigen::Isometry3d routePose(const simulation::Scene& scene, double height) {
+  const Eigen::Vector3d start = scene.route[0], next = scene.route[1];
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  const Eigen::Vector3d heading = (next - start).normalized();
+  pose.linear() = Eigen::AngleAxisd(std::atan2(heading.y(), heading.x()), Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  pose.translation() = start + Eigen::Vector3d(0, 0, height);
+  return pose;
+}
+
+TEST_P(SimulatedRegistration, RecoversTheRelativePoseFromIdentity) {
+  const SimulatedPair& pair = GetParam();
+  simulation::SceneOptions scene_options;
+  scene_options.kind = pair.kind;
+  scene_options.seed = 7;
+  const simulation::Scene scene = simulation::generateScene(scene_options);
+  const simulation::RayCaster caster(scene.mesh);
+  simulation::SensorEffects effects;
+  effects.motion_distortion = false;
+  effects.range_noise_sigma_m = pair.noise_sigma_m;
+  const LidarModelConstPtr model = ousterLikeModel(pair.product);
+  const simulation::LidarSimulator simulator(model, caster, effects, 3);
+
+  const Eigen::Isometry3d first = routePose(scene, pair.sensor_height_m);
+  Eigen::Isometry3d motion = Eigen::Isometry3d::Identity();
+  motion.linear() = (Eigen::AngleAxisd(pair.yaw_deg * kDegree, Eigen::Vector3d::UnitZ()) *
+                     Eigen::AngleAxisd(pair.roll_deg * kDegree, Eigen::Vector3d::UnitX()))
+                        .toRotationMatrix();
+  motion.translation() = Eigen::Vector3d(pair.forward_m, pair.sideways_m, 0.02);
+  const Eigen::Isometry3d second = first * motion;
+  const simulation::InterpolatedTrajectory still_first({0.0, 1.0}, {first, first});
+  const simulation::InterpolatedTrajectory still_second({0.0, 1.0}, {second, second});
+  const simulation::SimulatedScan target = simulator.simulate(still_first, 0.0, 0);
+  const simulation::SimulatedScan source = simulator.simulate(still_second, 0.0, 1);
+  const Eigen::Isometry3d truth = target.column_poses.front().inverse() * source.column_poses.front();
+  ASSERT_LT((truth.matrix() - motion.matrix()).norm(), 1e-9);
+
+  RegistrationOptions options;
+  options.kernel.scale_m = pair.kernel_scale_m;
+  ProjectiveIcp icp(options);
+  icp.setTarget(target.image);
+  const RegistrationResult result = icp.align(source.image, Eigen::Isometry3d::Identity());
+  const PoseError error = poseError(result.target_from_source, truth);
+  std::printf("%s: error %.2f mm %.4f deg, %zu inliers, %d iterations, rms %.2f mm, condition %.3g\n", pair.name,
+              error.translation_m * 1e3, error.rotation_deg, result.inliers, result.iterations,
+              result.residual_rms_m * 1e3, result.condition_number);
+  EXPECT_LT(error.translation_m, 0.01);
+  EXPECT_LT(error.rotation_deg, 0.1);
+  EXPECT_GT(result.inliers, 5000u);
+  EXPECT_TRUE(std::isfinite(result.condition_number));
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Scenes, SimulatedRegistration,
+    ::testing::Values(SimulatedPair{"outdoor_exact", simulation::SceneKind::kOutdoor, "OS-1-128", 1.8, 0.9, 0.1, 8.0, 1.0, 0.0, 0.5},
+                      SimulatedPair{"outdoor_noisy", simulation::SceneKind::kOutdoor, "OS-1-128", 1.8, 0.6, -0.2, -4.0, -0.5, 0.02, 0.5},
+                      SimulatedPair{"indoor_exact", simulation::SceneKind::kIndoor, "OS-0-128", 1.0, 0.5, 0.1, 10.0, 0.8, 0.0, 0.2},
+                      SimulatedPair{"indoor_noisy", simulation::SceneKind::kIndoor, "OS-0-128", 1.0, 0.7, 0.0, -3.0, 0.0, 0.01, 0.2}),
+    [](const ::testing::TestParamInfo<SimulatedPair>& info) { return std::string(info.param.name); });
+
+// ------------------------------------------------------------ real data
+
+TEST(RealRegistration, Kitti94To95FromIdentity) {
+  RIM_REQUIRE_DATA(scan94, "kitti00/velodyne/000094.bin");
+  RIM_REQUIRE_DATA(scan95, "kitti00/velodyne/000095.bin");
+  RIM_REQUIRE_DATA(poses_path, "kitti00/poses_00_full_evo.txt");
+  RIM_REQUIRE_DATA(calibration, "kitti00/calib.txt");
+  const auto model = std::make_shared<const LidarModel>(io::kittiHdl64Intrinsics(2048));
+  const RangeImage target = projectPointCloud(io::readKittiVelodyne(scan94), model);
+  const RangeImage source = projectPointCloud(io::readKittiVelodyne(scan95), model);
+  const std::vector<Eigen::Isometry3d> poses =
+      io::velodynePosesFromCameraPoses(io::readKittiPoses(poses_path), io::readKittiVelodyneToCamera(calibration));
+  ASSERT_GT(poses.size(), 95u);
+  const Eigen::Isometry3d truth = poses[94].inverse() * poses[95];
+
+  ProjectiveIcp icp;
+  icp.setTarget(target);
+  const RegistrationResult result = icp.align(source, Eigen::Isometry3d::Identity());
+  const PoseError error = poseError(result.target_from_source, truth);
+  const Eigen::Vector3d t = result.target_from_source.translation();
+  std::printf("KITTI 94->95: estimate (%.4f, %.4f, %.4f) m, truth (%.4f, %.4f, %.4f) m; error %.2f cm %.4f deg, "
+              "%zu inliers, %d iterations, rms %.1f mm\n",
+              t.x(), t.y(), t.z(), truth.translation().x(), truth.translation().y(), truth.translation().z(),
+              error.translation_m * 100, error.rotation_deg, result.inliers, result.iterations,
+              result.residual_rms_m * 1e3);
+  EXPECT_LE(error.translation_m, 0.05);
+  EXPECT_LE(error.rotation_deg, 0.1);
+}
+
+TEST(RealRegistration, OusterLbN3AgainstReferencePoses) {
+  RIM_REQUIRE_DATA(pcap, "ouster-pcaps/OS-1-128_v2.3.0_1024x10_lb_n3.pcap");
+  RIM_REQUIRE_DATA(metadata_path, "ouster-pcaps/OS-1-128_v2.3.0_1024x10.json");
+  RIM_REQUIRE_DATA(poses_path, "ouster-pcaps/OS-1-128_v2.3.0_1024x10_lb_n3_poses_kitti.txt");
+  const OusterMetadata metadata = loadOusterMetadata(metadata_path);
+  const auto model = std::make_shared<const LidarModel>(metadata.intrinsics);
+  std::vector<RangeImage> frames;
+  io::readOusterScans(pcap, metadata, [&](const LidarScan& scan) {
+    if (scan.receivedColumns() > 0) frames.push_back(toRangeImage(scan, model));
+  });
+  ASSERT_EQ(frames.size(), 3u);
+  const std::vector<Eigen::Isometry3d> sensor_poses = io::readKittiPoses(poses_path);
+  ASSERT_EQ(sensor_poses.size(), 3u);
+  const Eigen::Isometry3d& lidar_to_sensor = metadata.intrinsics.lidar_to_sensor;
+
+  ProjectiveIcp icp;
+  Eigen::Isometry3d chained = Eigen::Isometry3d::Identity();
+  for (int k = 0; k + 1 < 3; ++k) {
+    // T_map_lidar = T_map_sensor * lidar_to_sensor.
+    const Eigen::Isometry3d truth =
+        (sensor_poses[k] * lidar_to_sensor).inverse() * (sensor_poses[k + 1] * lidar_to_sensor);
+    icp.setTarget(frames[k]);
+    const RegistrationResult result = icp.align(frames[k + 1], Eigen::Isometry3d::Identity());
+    chained = chained * result.target_from_source;
+    const PoseError error = poseError(result.target_from_source, truth);
+    std::printf("lb_n3 %d->%d: error %.2f cm %.4f deg, %zu inliers, %d iterations, rms %.1f mm\n", k, k + 1,
+                error.translation_m * 100, error.rotation_deg, result.inliers, result.iterations,
+                result.residual_rms_m * 1e3);
+    EXPECT_LE(error.translation_m, 0.05);
+    EXPECT_LE(error.rotation_deg, 0.2);
+  }
+  const PoseError chain_error =
+      poseError(chained, (sensor_poses[0] * lidar_to_sensor).inverse() * (sensor_poses[2] * lidar_to_sensor));
+  std::printf("lb_n3 0->2 chained: error %.2f cm %.4f deg\n", chain_error.translation_m * 100, chain_error.rotation_deg);
+  EXPECT_LE(chain_error.translation_m, 0.05);
+  EXPECT_LE(chain_error.rotation_deg, 0.2);
+}
+
+// ------------------------------------------------------------ degenerate and bad input
+
+RangeImage scanOf(const simulation::TriangleMesh& mesh, const LidarModelConstPtr& model, const Eigen::Isometry3d& pose) {
+  const simulation::RayCaster caster(mesh);
+  simulation::SensorEffects effects;
+  effects.motion_distortion = false;
+  const simulation::LidarSimulator simulator(model, caster, effects, 1);
+  return simulator.simulate(simulation::InterpolatedTrajectory({0.0, 1.0}, {pose, pose}), 0.0, 0).image;
+}
+
+TEST(DegenerateRegistration, SinglePlaneHasALargeConditionNumber) {
+  const LidarModelConstPtr model = ousterLikeModel("OS-0-128");
+  const simulation::TriangleMesh floor =
+      simulation::makeQuad({-30.0f, -30.0f, 0.0f}, {60.0f, 0.0f, 0.0f}, {0.0f, 60.0f, 0.0f});
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  pose.translation() = Eigen::Vector3d(0, 0, 1.5);
+  const RangeImage target = scanOf(floor, model, pose);
+  pose.translation() = Eigen::Vector3d(0.3, 0.1, 1.45);
+  const RangeImage source = scanOf(floor, model, pose);
+  ProjectiveIcp icp;
+  icp.setTarget(target);
+  const RegistrationResult result = icp.align(source, Eigen::Isometry3d::Identity());
+  std::printf("single plane: condition %.3g, %zu inliers\n", result.condition_number, result.inliers);
+  EXPECT_GT(result.inliers, 1000u);
+  EXPECT_GT(result.condition_number, 1e6);
+  EXPECT_TRUE(result.target_from_source.matrix().allFinite());
+  // The constrained directions are still right: height, roll and pitch.
+  EXPECT_NEAR(result.target_from_source.translation().z(), -0.05, 0.005);
+  // The unconstrained ones stay where they started instead of drifting.
+  EXPECT_LT(result.target_from_source.translation().head<2>().norm(), 0.01);
+}
+
+TEST(DegenerateRegistration, EmptySourceGivesNoInliersAndTheInitialPose) {
+  const LidarModelConstPtr model = ousterLikeModel("OS-0-128");
+  const RangeImage target =
+      scanOf(simulation::makeBox({-5.0f, -4.0f, -1.5f}, {6.0f, 5.0f, 2.5f}, true), model, Eigen::Isometry3d::Identity());
+  const RangeImage empty(model);
+  ProjectiveIcp icp;
+  icp.setTarget(target);
+  Eigen::Isometry3d initial = Eigen::Isometry3d::Identity();
+  initial.translation() = Eigen::Vector3d(0.1, 0.0, 0.0);
+  RegistrationResult result = icp.align(empty, initial);
+  EXPECT_EQ(result.inliers, 0u);
+  EXPECT_TRUE(result.target_from_source.isApprox(initial));
+  EXPECT_FALSE(std::isfinite(result.condition_number));
+  // And the other way round: an all-invalid target.
+  icp.setTarget(empty);
+  result = icp.align(target, initial);
+  EXPECT_EQ(result.inliers, 0u);
+  EXPECT_TRUE(result.target_from_source.isApprox(initial));
+}
+
+TEST(DegenerateRegistration, BadInputThrowsClearErrors) {
+  RegistrationOptions options;
+  options.iterations = {10};
+  EXPECT_THROW(ProjectiveIcp{options}, std::invalid_argument);
+  options = {};
+  options.strides = {4, 0, 1};
+  EXPECT_THROW(ProjectiveIcp{options}, std::invalid_argument);
+  options = {};
+  options.kernel.scale_m = 0.0;
+  EXPECT_THROW(ProjectiveIcp{options}, std::invalid_argument);
+
+  const RangeImage image(ousterLikeModel("OS-0-128"));
+  ProjectiveIcp icp;
+  EXPECT_FALSE(icp.hasTarget());
+  EXPECT_THROW(icp.align(image, Eigen::Isometry3d::Identity()), std::runtime_error);
+  icp.setTarget(image);
+  EXPECT_TRUE(icp.hasTarget());
+  Eigen::Isometry3d not_finite = Eigen::Isometry3d::Identity();
+  not_finite.translation().x() = NAN;
+  EXPECT_THROW(icp.align(image, not_finite), std::invalid_argument);
+}
+
+TEST(RobustKernel, WeightsFollowTheFormulas) {
+  RobustKernel kernel;
+  kernel.scale_m = 0.5;
+  EXPECT_DOUBLE_EQ(robustWeight(kernel, 0.0), 1.0);
+  EXPECT_DOUBLE_EQ(robustWeight(kernel, 0.5), 1.0 / std::sqrt(2.0));
+  kernel.type = RobustKernel::Type::kBarron;
+  kernel.alpha = 1.0;  // = pseudo-Huber
+  EXPECT_NEAR(robustWeight(kernel, 0.5), 1.0 / std::sqrt(2.0), 1e-12);
+  kernel.alpha = 2.0;  // least squares
+  EXPECT_DOUBLE_EQ(robustWeight(kernel, 3.0), 1.0);
+  kernel.alpha = 0.0;  // Cauchy: 1 / (1 + (e/c)^2 / 2)
+  EXPECT_NEAR(robustWeight(kernel, 0.5), 1.0 / 1.5, 1e-12);
+  kernel.alpha = -2.0;  // Geman-McClure: 1 / (1 + (e/c)^2 / 4)^2
+  EXPECT_NEAR(robustWeight(kernel, 1.0), 1.0 / 4.0, 1e-12);
+}
+
+}  // namespace
+}  // namespace range_image_mapping::registration
