@@ -2,6 +2,7 @@
 
 #include <XmlRpcValue.h>
 
+#include <cmath>
 #include <sstream>
 
 namespace range_image_mapping {
@@ -100,6 +101,27 @@ double ParameterReader::getDouble(const std::string& name, double default_value,
   return result;
 }
 
+std::vector<int> ParameterReader::getIntList(const std::string& name, const std::vector<int>& default_value,
+                                             int minimum, int maximum) const {
+  XmlRpc::XmlRpcValue value;
+  if (!node_.getParam(name, value)) return default_value;
+  if (value.getType() != XmlRpc::XmlRpcValue::TypeArray)
+    throw ParameterError("parameter " + fullName(name) + " must be a list of integers, got a " +
+                         typeName(value.getType()));
+  std::vector<int> result;
+  for (int i = 0; i < value.size(); ++i) {
+    if (value[i].getType() != XmlRpc::XmlRpcValue::TypeInt)
+      throw ParameterError("parameter " + fullName(name) + " must be a list of integers, entry " +
+                           toText(i) + " is a " + typeName(value[i].getType()));
+    const int entry = static_cast<int>(value[i]);
+    if (entry < minimum || entry > maximum)
+      throw ParameterError("parameter " + fullName(name) + " entry " + toText(i) + " is " + toText(entry) +
+                           ", expected within [" + toText(minimum) + ", " + toText(maximum) + "]");
+    result.push_back(entry);
+  }
+  return result;
+}
+
 AdapterParameters readAdapterParameters(const ros::NodeHandle& private_node) {
   const ParameterReader reader(private_node);
   AdapterParameters parameters;
@@ -158,6 +180,90 @@ AdapterParameters readAdapterParameters(const ros::NodeHandle& private_node) {
 
   parameters.statistics_period_s =
       reader.getDouble("statistics_period", defaults.statistics_period_s, 0.1, 3600.0);
+  return parameters;
+}
+
+namespace {
+
+// The core's registration options; names without units are SI (m, rad).
+registration::RegistrationOptions readRegistrationOptions(const ParameterReader& reader,
+                                                          const ros::NodeHandle& private_node) {
+  registration::RegistrationOptions options;
+  const registration::RegistrationOptions defaults;
+  options.strides = reader.getIntList("strides", defaults.strides, 1, 64);
+  options.iterations = reader.getIntList("iterations", defaults.iterations, 0, 1000);
+  if (options.strides.empty())
+    throw ParameterError("parameter " + private_node.resolveName("strides") + " is empty");
+  if (options.strides.size() != options.iterations.size())
+    throw ParameterError("parameter " + private_node.resolveName("iterations") + " has " +
+                         toText(options.iterations.size()) + " entries, " +
+                         private_node.resolveName("strides") + " has " + toText(options.strides.size()) +
+                         ": one per level");
+  options.source_stride = reader.getInt("source_stride", defaults.source_stride, 1, 64);
+  options.max_correspondence_distance_m = reader.getDouble(
+      "max_correspondence_distance", defaults.max_correspondence_distance_m, 1e-3, 100.0);
+  options.min_normal_cosine = reader.getDouble("min_normal_cosine", defaults.min_normal_cosine, -1.0, 1.0);
+  options.kernel.type = reader.getChoice("kernel", "pseudo_huber", {"pseudo_huber", "barron"}) == "barron"
+                            ? registration::RobustKernel::Type::kBarron
+                            : registration::RobustKernel::Type::kPseudoHuber;
+  options.kernel.scale_m = reader.getDouble("kernel_scale", defaults.kernel.scale_m, 1e-4, 100.0);
+  options.kernel.alpha = reader.getDouble("kernel_alpha", defaults.kernel.alpha, -1e6, 2.0);
+  options.normals.method =
+      reader.getChoice("normal_method", "cross_product", {"cross_product", "covariance"}) == "covariance"
+          ? registration::NormalMethod::kCovariance
+          : registration::NormalMethod::kCrossProduct;
+  options.normals.window_radius = reader.getInt("normal_window_radius", defaults.normals.window_radius, 1, 16);
+  options.normals.max_range_jump_ratio = static_cast<float>(
+      reader.getDouble("max_range_jump_ratio", defaults.normals.max_range_jump_ratio, 1e-3, 10.0));
+  options.convergence_rotation_rad =
+      reader.getDouble("convergence_rotation", defaults.convergence_rotation_rad, 0.0, 1.0);
+  options.convergence_translation_m =
+      reader.getDouble("convergence_translation", defaults.convergence_translation_m, 0.0, 1.0);
+  return options;
+}
+
+}  // namespace
+
+OdometryParameters readOdometryParameters(const ros::NodeHandle& private_node) {
+  const ParameterReader reader(private_node);
+  OdometryParameters parameters;
+  const OdometryParameters defaults;
+
+  parameters.odom_frame = reader.getString("odom_frame", defaults.odom_frame);
+  parameters.base_frame = reader.getString("base_frame", defaults.base_frame);
+  if (parameters.odom_frame.empty())
+    throw ParameterError("parameter " + private_node.resolveName("odom_frame") + " is empty");
+  if (parameters.base_frame.empty())
+    throw ParameterError("parameter " + private_node.resolveName("base_frame") + " is empty");
+  if (parameters.odom_frame == parameters.base_frame)
+    throw ParameterError("parameters " + private_node.resolveName("odom_frame") + " and " +
+                         private_node.resolveName("base_frame") + " are both '" + parameters.odom_frame + "'");
+  parameters.publish_tf = reader.getBool("publish_tf", defaults.publish_tf);
+  parameters.invert_tf = reader.getBool("invert_tf", defaults.invert_tf);
+  parameters.publish_deskewed_cloud = reader.getBool("publish_deskewed_cloud", defaults.publish_deskewed_cloud);
+  parameters.path_length = reader.getInt("path_length", defaults.path_length, 0, 1 << 24);
+  parameters.lidar_transform_timeout_s =
+      reader.getDouble("lidar_transform_timeout", defaults.lidar_transform_timeout_s, 0.0, 600.0);
+  parameters.queue_size = reader.getInt("queue_size", defaults.queue_size, 1, 1000);
+  parameters.statistics_period_s =
+      reader.getDouble("statistics_period", defaults.statistics_period_s, 0.1, 3600.0);
+
+  registration::OdometryOptions& odometry = parameters.odometry;
+  const registration::OdometryOptions odometry_defaults;
+  odometry.registration = readRegistrationOptions(reader, private_node);
+  odometry.deskew = reader.getBool("deskew", odometry_defaults.deskew);
+  odometry.constant_velocity_prior =
+      reader.getBool("constant_velocity_prior", odometry_defaults.constant_velocity_prior);
+  odometry.max_condition_number =
+      reader.getDouble("max_condition_number", odometry_defaults.max_condition_number, 1.0, 1e300);
+  odometry.min_inliers = static_cast<std::size_t>(
+      reader.getInt("min_inliers", static_cast<int>(odometry_defaults.min_inliers), 0, 1 << 30));
+  odometry.keyframe_distance_m =
+      reader.getDouble("keyframe_distance", odometry_defaults.keyframe_distance_m, 0.0, 1000.0);
+  odometry.keyframe_angle_rad =
+      reader.getDouble("keyframe_angle_deg", odometry_defaults.keyframe_angle_rad * 180.0 / M_PI, 0.0, 180.0) *
+      M_PI / 180.0;
+  odometry.max_time_gap_s = reader.getDouble("max_time_gap", odometry_defaults.max_time_gap_s, 1e-3, 3600.0);
   return parameters;
 }
 

@@ -4,6 +4,7 @@
 #pragma once
 
 #include "range_image_mapping/ouster_packet.h"
+#include "range_image_mapping/registration/lidar_odometry.h"
 
 #include <ros/node_handle.h>
 
@@ -32,6 +33,9 @@ class ParameterReader {
   // Accepts integers too (YAML "10" for 10.0).
   double getDouble(const std::string& name, double default_value, double minimum,
                    double maximum) const;
+  // A list of integers, each within [minimum, maximum].
+  std::vector<int> getIntList(const std::string& name, const std::vector<int>& default_value,
+                              int minimum, int maximum) const;
 
  private:
   std::string fullName(const std::string& name) const;
@@ -75,5 +79,26 @@ struct AdapterParameters {
 // Reads every Adapter parameter from the nodelet's private node handle.
 // Throws ParameterError naming the first bad parameter.
 AdapterParameters readAdapterParameters(const ros::NodeHandle& private_node);
+
+// ------------------------------------------------------------ Odometry nodelet
+
+struct OdometryParameters {
+  registration::OdometryOptions odometry;  // the core's options (kernel, levels, deskew, ...)
+  std::string odom_frame = "odom";
+  std::string base_frame = "base_link";
+  bool publish_tf = true;
+  // Publish base_frame -> odom_frame instead, for robots whose wheel odometry
+  // already owns odom -> base_link (REP 105: a frame has one parent).
+  bool invert_tf = false;
+  bool publish_deskewed_cloud = false;
+  int path_length = 10000;               // poses kept in the path message; 0: no path
+  double lidar_transform_timeout_s = 2.0;  // wall time to wait for base_frame -> lidar frame
+  int queue_size = 8;                    // range images waiting for the odometry
+  double statistics_period_s = 10.0;     // period of the log summary
+};
+
+// Reads every Odometry parameter from the nodelet's private node handle.
+// Throws ParameterError naming the first bad parameter.
+OdometryParameters readOdometryParameters(const ros::NodeHandle& private_node);
 
 }  // namespace range_image_mapping

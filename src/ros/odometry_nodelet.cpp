@@ -1,0 +1,466 @@
+// Odometry: range images in (the Adapter's shared pointers, same manager),
+// LiDAR odometry out as nav_msgs/Odometry, a bounded path, tf odom -> base_link
+// and optionally the deskewed cloud.
+//
+// Every callback (images, the reset service, timers) runs on the nodelet's
+// single-threaded queue (getNodeHandle), so the members need no locks. Nothing
+// thrown by bad input leaves a callback: it is counted and logged (throttled).
+#include "range_image_mapping/LidarRangeImage.h"
+#include "range_image_mapping/registration/lidar_odometry.h"
+#include "range_image_mapping/ros/parameters.h"
+#include "range_image_mapping/ros/range_image_conversions.h"
+
+#include <diagnostic_updater/diagnostic_updater.h>
+#include <geometry_msgs/PoseStamped.h>
+#include <geometry_msgs/TransformStamped.h>
+#include <nav_msgs/Odometry.h>
+#include <nav_msgs/Path.h>
+#include <nodelet/nodelet.h>
+#include <pluginlib/class_list_macros.hpp>
+#include <ros/ros.h>
+#include <sensor_msgs/PointCloud2.h>
+#include <sensor_msgs/point_cloud2_iterator.h>
+#include <std_srvs/Empty.h>
+#include <tf2_eigen/tf2_eigen.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_broadcaster.h>
+#include <tf2_ros/transform_listener.h>
+
+#include <boost/make_shared.hpp>
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <deque>
+#include <memory>
+#include <optional>
+#include <string>
+
+namespace range_image_mapping {
+namespace {
+
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
+
+// Counts since the start; windows (log, diagnostics) are differences of two snapshots.
+struct OdometryStatistics {
+  std::size_t frames = 0;          // scans given to the odometry
+  std::size_t registered = 0;      // scans registered (not skipped, not a reset)
+  std::size_t iterations = 0;      // over registered scans
+  std::size_t inliers = 0;         // over registered scans
+  std::size_t degenerate = 0;
+  std::size_t skipped = 0;
+  std::size_t resets = 0;
+  std::size_t dropped_frames = 0;  // gaps in the sensor's frame counter
+  std::size_t out_of_order = 0;    // frames older than the last published one
+  std::size_t rejected = 0;        // messages that could not be converted
+  double seconds = 0.0;            // wall time in the odometry step
+
+  OdometryStatistics operator-(const OdometryStatistics& earlier) const {
+    OdometryStatistics d;
+    d.frames = frames - earlier.frames;
+    d.registered = registered - earlier.registered;
+    d.iterations = iterations - earlier.iterations;
+    d.inliers = inliers - earlier.inliers;
+    d.degenerate = degenerate - earlier.degenerate;
+    d.skipped = skipped - earlier.skipped;
+    d.resets = resets - earlier.resets;
+    d.dropped_frames = dropped_frames - earlier.dropped_frames;
+    d.out_of_order = out_of_order - earlier.out_of_order;
+    d.rejected = rejected - earlier.rejected;
+    d.seconds = seconds - earlier.seconds;
+    return d;
+  }
+};
+
+// The statistics of one window and its wall-clock length.
+struct StatisticsWindow {
+  OdometryStatistics start;
+  ros::SteadyTime started;
+
+  // Returns the difference since the last call and starts a new window.
+  std::pair<OdometryStatistics, double> advance(const OdometryStatistics& now) {
+    const ros::SteadyTime time = ros::SteadyTime::now();
+    const double period = started.isZero() ? 0.0 : (time - started).toSec();
+    const OdometryStatistics window = now - start;
+    start = now;
+    started = time;
+    return {window, period};
+  }
+};
+
+// Lets one message through per period, timed by the steady clock (ROS time
+// stands still in a paused replay).
+class SteadyThrottle {
+ public:
+  bool allow(double period_s) {
+    const ros::SteadyTime now = ros::SteadyTime::now();
+    if (!last_.isZero() && (now - last_).toSec() < period_s) return false;
+    last_ = now;
+    return true;
+  }
+
+ private:
+  ros::SteadyTime last_;
+};
+
+// Covariance of a perturbation in the lidar frame, core order [rotation,
+// translation], as the covariance of the same perturbation of base_frame in
+// ROS order [x y z, roll pitch yaw]: the adjoint of T_base_lidar.
+Matrix6d baseCovariance(const Matrix6d& lidar_rotation_translation, const Eigen::Isometry3d& base_from_lidar) {
+  Matrix6d reorder = Matrix6d::Zero();  // [rotation, translation] -> [translation, rotation]
+  reorder.block<3, 3>(0, 3).setIdentity();
+  reorder.block<3, 3>(3, 0).setIdentity();
+  const Matrix6d lidar = reorder * lidar_rotation_translation * reorder.transpose();
+  const Eigen::Matrix3d rotation = base_from_lidar.linear();
+  const Eigen::Vector3d t = base_from_lidar.translation();
+  Eigen::Matrix3d t_cross;
+  t_cross << 0, -t.z(), t.y(), t.z(), 0, -t.x(), -t.y(), t.x(), 0;
+  Matrix6d adjoint = Matrix6d::Zero();
+  adjoint.block<3, 3>(0, 0) = rotation;
+  adjoint.block<3, 3>(0, 3) = t_cross * rotation;
+  adjoint.block<3, 3>(3, 3) = rotation;
+  return adjoint * lidar * adjoint.transpose();
+}
+
+void copyCovariance(const Matrix6d& covariance, boost::array<double, 36>& out) {
+  for (int r = 0; r < 6; ++r)
+    for (int c = 0; c < 6; ++c) out[r * 6 + c] = covariance(r, c);
+}
+
+// The finite points as an unorganized x y z cloud, reusing cloud's buffers.
+void pointsToPointCloud2(const std::vector<Eigen::Vector3f>& points, const std_msgs::Header& header,
+                         sensor_msgs::PointCloud2& cloud) {
+  const std::size_t count =
+      std::count_if(points.begin(), points.end(), [](const Eigen::Vector3f& p) { return p.allFinite(); });
+  cloud.header = header;
+  sensor_msgs::PointCloud2Modifier modifier(cloud);
+  modifier.setPointCloud2FieldsByString(1, "xyz");
+  modifier.resize(count);
+  cloud.height = 1;
+  cloud.width = static_cast<uint32_t>(count);
+  cloud.is_dense = true;
+  sensor_msgs::PointCloud2Iterator<float> x(cloud, "x"), y(cloud, "y"), z(cloud, "z");
+  for (const Eigen::Vector3f& point : points) {
+    if (!point.allFinite()) continue;
+    *x = point.x();
+    *y = point.y();
+    *z = point.z();
+    ++x, ++y, ++z;
+  }
+}
+
+}  // namespace
+
+class OdometryNodelet : public nodelet::Nodelet {
+ public:
+  void onInit() override;
+
+ private:
+  void onRangeImage(const LidarRangeImage::ConstPtr& message);
+  bool onReset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
+  void noteFrameCounter(const LidarRangeImage& message);
+  // T_base_lidar once tf has it, identity after lidar_transform_timeout.
+  const Eigen::Isometry3d* baseFromLidar(const std::string& lidar_frame);
+  // step_s: time since the previous registered scan, 0 after a reset.
+  void publish(const registration::OdometryUpdate& update, const std_msgs::Header& header,
+               const Eigen::Isometry3d& base_from_lidar, double step_s);
+  void publishDeskewedCloud(const std_msgs::Header& header);
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
+  void onStatisticsTimer(const ros::SteadyTimerEvent&);
+  void clearTrajectory();
+
+  OdometryParameters parameters_;
+  std::unique_ptr<registration::LidarOdometry> odometry_;
+  LidarModelCache models_;
+
+  ros::Subscriber range_image_subscriber_;
+  ros::Publisher odometry_publisher_, path_publisher_, deskewed_cloud_publisher_;
+  ros::ServiceServer reset_service_;
+  ros::SteadyTimer statistics_timer_, diagnostics_timer_;
+  std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
+  std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
+  std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;
+  std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
+
+  // base_frame -> lidar frame, looked up once per lidar frame name.
+  std::string lidar_frame_;
+  std::optional<Eigen::Isometry3d> base_from_lidar_;
+  ros::SteadyTime lidar_transform_wait_started_;
+
+  std::deque<geometry_msgs::PoseStamped> path_;
+  ros::Time last_published_stamp_;
+  std::optional<uint32_t> last_frame_counter_;
+
+  OdometryStatistics statistics_;
+  StatisticsWindow log_window_, diagnostics_window_;
+  registration::OdometryUpdate last_update_;
+  std::string last_warning_;
+  SteadyThrottle warning_log_, error_log_, frame_log_;
+};
+
+void OdometryNodelet::onInit() {
+  ros::NodeHandle& node = getNodeHandle();
+  try {
+    parameters_ = readOdometryParameters(getPrivateNodeHandle());
+    odometry_ = std::make_unique<registration::LidarOdometry>(parameters_.odometry);
+  } catch (const std::exception& error) {
+    NODELET_ERROR("Odometry not started: %s", error.what());
+    return;
+  }
+  tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
+  tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_);
+  if (parameters_.publish_tf) tf_broadcaster_ = std::make_unique<tf2_ros::TransformBroadcaster>();
+
+  odometry_publisher_ = node.advertise<nav_msgs::Odometry>("odometry", 16);
+  if (parameters_.path_length > 0) path_publisher_ = node.advertise<nav_msgs::Path>("path", 1);
+  if (parameters_.publish_deskewed_cloud)
+    deskewed_cloud_publisher_ = node.advertise<sensor_msgs::PointCloud2>("deskewed_cloud", 4);
+  reset_service_ = getPrivateNodeHandle().advertiseService("reset", &OdometryNodelet::onReset, this);
+
+  diagnostics_ = std::make_unique<diagnostic_updater::Updater>(node, getPrivateNodeHandle(), getName());
+  diagnostics_->setHardwareID("lidar_odometry");
+  diagnostics_->add("odometry", this, &OdometryNodelet::diagnose);
+  diagnostics_timer_ = node.createSteadyTimer(ros::WallDuration(1.0),
+                                              [this](const ros::SteadyTimerEvent&) { diagnostics_->update(); });
+  statistics_timer_ = node.createSteadyTimer(ros::WallDuration(parameters_.statistics_period_s),
+                                             &OdometryNodelet::onStatisticsTimer, this);
+
+  range_image_subscriber_ = node.subscribe("range_image", parameters_.queue_size,
+                                           &OdometryNodelet::onRangeImage, this);
+  NODELET_INFO("Odometry: range images from %s, odometry on %s, %s %s -> %s%s",
+               range_image_subscriber_.getTopic().c_str(), odometry_publisher_.getTopic().c_str(),
+               parameters_.publish_tf ? "tf" : "no tf",
+               parameters_.invert_tf ? parameters_.base_frame.c_str() : parameters_.odom_frame.c_str(),
+               parameters_.invert_tf ? parameters_.odom_frame.c_str() : parameters_.base_frame.c_str(),
+               parameters_.invert_tf ? " (inverted)" : "");
+}
+
+void OdometryNodelet::onRangeImage(const LidarRangeImage::ConstPtr& message) {
+  try {
+    noteFrameCounter(*message);
+    RangeImage image;
+    try {
+      image = fromMessage(*message, models_);
+    } catch (const std::exception& error) {
+      ++statistics_.rejected;
+      if (error_log_.allow(parameters_.statistics_period_s))
+        NODELET_ERROR("range image on %s dropped: %s", range_image_subscriber_.getTopic().c_str(), error.what());
+      return;
+    }
+    // The core deskews with column times minus the scan time: both must be on
+    // the sensor's clock, and the header stamp may be the receive time. A zero
+    // stamp makes the core use the first valid column's time.
+    if (std::any_of(image.column_timestamp_ns.begin(), image.column_timestamp_ns.end(),
+                    [](uint64_t t) { return t != 0; }))
+      image.stamp_ns = 0;
+
+    const registration::OdometryUpdate update = odometry_->process(image);
+    ++statistics_.frames;
+    statistics_.seconds += update.seconds;
+    if (update.skipped) ++statistics_.skipped;
+    if (update.reset) ++statistics_.resets;
+    if (update.degenerate) ++statistics_.degenerate;
+    if (!update.skipped && !update.reset) {
+      ++statistics_.registered;
+      statistics_.iterations += update.iterations;
+      statistics_.inliers += update.inliers;
+    }
+    const double step_s = update.reset || update.skipped || last_update_.stamp_ns == 0 ||
+                                  update.stamp_ns <= last_update_.stamp_ns
+                              ? 0.0
+                              : double(update.stamp_ns - last_update_.stamp_ns) * 1e-9;
+    if (!update.skipped) last_update_ = update;
+    if (update.reset && update.warning.empty())  // the first scan
+      NODELET_INFO("odometry started: frame %u in %s, stamped %.3f", message->frame_id,
+                   message->header.frame_id.c_str(), message->header.stamp.toSec());
+    if (!update.warning.empty()) {
+      last_warning_ = update.warning;
+      if (warning_log_.allow(1.0))
+        NODELET_WARN("odometry, frame %u stamped %.3f: %s", message->frame_id, message->header.stamp.toSec(),
+                     update.warning.c_str());
+    }
+    if (update.reset) clearTrajectory();
+    if (update.skipped) return;
+
+    if (!last_published_stamp_.isZero() && message->header.stamp <= last_published_stamp_ && !update.reset) {
+      ++statistics_.out_of_order;
+      if (frame_log_.allow(1.0))
+        NODELET_WARN("frame %u stamped %.3f is not after the last published one (%.3f): not published",
+                     message->frame_id, message->header.stamp.toSec(), last_published_stamp_.toSec());
+      return;
+    }
+    const Eigen::Isometry3d* base_from_lidar = baseFromLidar(message->header.frame_id);
+    if (!base_from_lidar) return;  // still waiting for tf
+    publish(update, message->header, *base_from_lidar, step_s);
+    if (deskewed_cloud_publisher_ && deskewed_cloud_publisher_.getNumSubscribers() > 0)
+      publishDeskewedCloud(message->header);
+    diagnostics_->update();
+  } catch (const std::exception& error) {
+    ++statistics_.rejected;
+    if (error_log_.allow(parameters_.statistics_period_s))
+      NODELET_ERROR("range image on %s failed: %s", range_image_subscriber_.getTopic().c_str(), error.what());
+  }
+}
+
+// Ouster revolutions count up by one: a gap means scans were dropped (by the
+// Adapter, a full queue or the network), a step back a restart or a bag loop.
+// Sources without a counter (PointCloud2) send 0 throughout.
+void OdometryNodelet::noteFrameCounter(const LidarRangeImage& message) {
+  const uint32_t counter = message.frame_id;
+  if (last_frame_counter_ && !(counter == 0 && *last_frame_counter_ == 0)) {
+    const uint32_t previous = *last_frame_counter_;
+    if (counter > previous + 1) {
+      statistics_.dropped_frames += counter - previous - 1;
+      if (frame_log_.allow(1.0))
+        NODELET_WARN("dropped frames: frame %u follows frame %u (%u missing, %zu so far)", counter, previous,
+                     counter - previous - 1, statistics_.dropped_frames);
+    } else if (counter <= previous) {
+      if (frame_log_.allow(1.0))
+        NODELET_WARN("frame %u after frame %u: out of order, a restart or a bag loop", counter, previous);
+    }
+  }
+  last_frame_counter_ = counter;
+}
+
+const Eigen::Isometry3d* OdometryNodelet::baseFromLidar(const std::string& lidar_frame) {
+  if (lidar_frame != lidar_frame_) {
+    lidar_frame_ = lidar_frame;
+    base_from_lidar_.reset();
+    lidar_transform_wait_started_ = ros::SteadyTime::now();
+    if (lidar_frame.empty() || lidar_frame == parameters_.base_frame) base_from_lidar_ = Eigen::Isometry3d::Identity();
+  }
+  if (base_from_lidar_) return &*base_from_lidar_;
+  std::string error;
+  if (tf_buffer_->canTransform(parameters_.base_frame, lidar_frame, ros::Time(0), &error)) {
+    base_from_lidar_ =
+        tf2::transformToEigen(tf_buffer_->lookupTransform(parameters_.base_frame, lidar_frame, ros::Time(0)));
+    const Eigen::Vector3d t = base_from_lidar_->translation();
+    NODELET_INFO("%s -> %s from tf: translation (%.3f, %.3f, %.3f) m", parameters_.base_frame.c_str(),
+                 lidar_frame.c_str(), t.x(), t.y(), t.z());
+  } else if ((ros::SteadyTime::now() - lidar_transform_wait_started_).toSec() >=
+             parameters_.lidar_transform_timeout_s) {
+    base_from_lidar_ = Eigen::Isometry3d::Identity();
+    NODELET_WARN("no transform %s -> %s after %.1f s (%s): using the identity, so %s is the lidar",
+                 parameters_.base_frame.c_str(), lidar_frame.c_str(), parameters_.lidar_transform_timeout_s,
+                 error.c_str(), parameters_.base_frame.c_str());
+  } else {
+    return nullptr;
+  }
+  return &*base_from_lidar_;
+}
+
+void OdometryNodelet::publish(const registration::OdometryUpdate& update, const std_msgs::Header& header,
+                              const Eigen::Isometry3d& base_from_lidar, double step_s) {
+  // odom is base_frame at the first scan: T_odom_base = T_base_lidar T_odom_lidar T_lidar_base.
+  const Eigen::Isometry3d odom_from_base = base_from_lidar * update.pose * base_from_lidar.inverse();
+  if (!odom_from_base.matrix().allFinite()) {
+    NODELET_ERROR("non-finite pose for frame stamped %.3f: not published", header.stamp.toSec());
+    return;
+  }
+  last_published_stamp_ = header.stamp;
+
+  const auto odometry = boost::make_shared<nav_msgs::Odometry>();
+  odometry->header.stamp = header.stamp;
+  odometry->header.frame_id = parameters_.odom_frame;
+  odometry->child_frame_id = parameters_.base_frame;
+  odometry->pose.pose = tf2::toMsg(odom_from_base);
+  const Matrix6d covariance = baseCovariance(update.covariance, base_from_lidar);
+  copyCovariance(covariance, odometry->pose.covariance);
+  // Velocity of the base origin in base_frame: v_lidar moved by the lever arm.
+  const Eigen::Vector3d angular = base_from_lidar.linear() * update.angular_velocity;
+  const Eigen::Vector3d linear =
+      base_from_lidar.linear() * update.linear_velocity - angular.cross(base_from_lidar.translation());
+  tf2::toMsg(linear, odometry->twist.twist.linear);
+  tf2::toMsg(angular, odometry->twist.twist.angular);
+  // The registration's covariance is that of one step: divided by the step's
+  // squared duration, the velocity's. Unknown (the core's identity) otherwise.
+  copyCovariance(step_s > 0.0 ? Matrix6d(covariance / (step_s * step_s)) : covariance, odometry->twist.covariance);
+  odometry_publisher_.publish(boost::shared_ptr<const nav_msgs::Odometry>(odometry));
+
+  if (tf_broadcaster_) {
+    geometry_msgs::TransformStamped transform =
+        tf2::eigenToTransform(parameters_.invert_tf ? odom_from_base.inverse() : odom_from_base);
+    transform.header.stamp = header.stamp;
+    transform.header.frame_id = parameters_.invert_tf ? parameters_.base_frame : parameters_.odom_frame;
+    transform.child_frame_id = parameters_.invert_tf ? parameters_.odom_frame : parameters_.base_frame;
+    tf_broadcaster_->sendTransform(transform);
+  }
+
+  if (path_publisher_) {
+    geometry_msgs::PoseStamped pose;
+    pose.header = odometry->header;
+    pose.pose = odometry->pose.pose;
+    path_.push_back(pose);
+    while (path_.size() > std::size_t(parameters_.path_length)) path_.pop_front();
+    if (path_publisher_.getNumSubscribers() > 0) {
+      const auto path = boost::make_shared<nav_msgs::Path>();
+      path->header = odometry->header;
+      path->poses.assign(path_.begin(), path_.end());
+      path_publisher_.publish(boost::shared_ptr<const nav_msgs::Path>(path));
+    }
+  }
+}
+
+void OdometryNodelet::publishDeskewedCloud(const std_msgs::Header& header) {
+  const auto cloud = boost::make_shared<sensor_msgs::PointCloud2>();
+  pointsToPointCloud2(odometry_->deskewedScan().points, header, *cloud);
+  deskewed_cloud_publisher_.publish(boost::shared_ptr<const sensor_msgs::PointCloud2>(cloud));
+}
+
+void OdometryNodelet::clearTrajectory() {
+  path_.clear();
+  last_published_stamp_ = ros::Time();
+}
+
+bool OdometryNodelet::onReset(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
+  if (!odometry_) return false;
+  odometry_->reset();
+  clearTrajectory();
+  last_frame_counter_.reset();
+  last_update_ = registration::OdometryUpdate();
+  NODELET_INFO("odometry reset: the next scan starts at the identity");
+  return true;
+}
+
+void OdometryNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
+  const auto [window, period] = diagnostics_window_.advance(statistics_);
+  const double rate = period > 0.0 ? double(window.frames) / period : 0.0;
+  const double registered = std::max<double>(1.0, double(window.registered));
+  status.add("rate (Hz)", rate);
+  status.add("frames", window.frames);
+  status.add("mean iterations", double(window.iterations) / registered);
+  status.add("mean inliers", double(window.inliers) / registered);
+  status.add("mean step (ms)", window.frames > 0 ? 1e3 * window.seconds / double(window.frames) : 0.0);
+  status.add("degenerate", window.degenerate);
+  status.add("skipped", window.skipped);
+  status.add("resets", window.resets);
+  status.add("dropped frames", window.dropped_frames);
+  status.add("out of order", window.out_of_order);
+  status.add("rejected messages", window.rejected);
+  status.add("condition number", last_update_.condition_number);
+  status.add("last warning", last_warning_);
+  if (!odometry_)
+    status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "not started: bad parameters");
+  else if (window.frames == 0)
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "no range images");
+  else if (window.degenerate + window.dropped_frames + window.out_of_order + window.rejected + window.skipped > 0)
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN,
+                   window.degenerate > 0 ? "degenerate registrations" : "dropped, skipped or out-of-order frames");
+  else
+    status.summary(diagnostic_msgs::DiagnosticStatus::OK, "tracking");
+}
+
+void OdometryNodelet::onStatisticsTimer(const ros::SteadyTimerEvent&) {
+  const auto [window, period] = log_window_.advance(statistics_);
+  if (window.frames == 0 || period <= 0.0) return;
+  const double registered = std::max<double>(1.0, double(window.registered));
+  NODELET_INFO("odometry: %.1f Hz, %.1f ms per step, %.1f iterations, %.0f inliers; degenerate %zu, skipped %zu, "
+               "resets %zu, dropped %zu, out of order %zu, rejected %zu",
+               double(window.frames) / period, 1e3 * window.seconds / double(window.frames),
+               double(window.iterations) / registered, double(window.inliers) / registered, window.degenerate,
+               window.skipped, window.resets, window.dropped_frames, window.out_of_order, window.rejected);
+}
+
+}  // namespace range_image_mapping
+
+PLUGINLIB_EXPORT_CLASS(range_image_mapping::OdometryNodelet, nodelet::Nodelet)
