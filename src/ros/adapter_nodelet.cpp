@@ -8,6 +8,7 @@
 #include "range_image_mapping/ouster_packet.h"
 #include "range_image_mapping/point_cloud_projection.h"
 #include "range_image_mapping/ros/parameters.h"
+#include "range_image_mapping/ros/steady_throttle.h"
 #include "range_image_mapping/ros/range_image_conversions.h"
 #include "range_image_mapping/scan_batcher.h"
 
@@ -43,22 +44,6 @@ struct AdapterDrops {
   std::size_t total() const {
     return foreign_packet_messages + packets_without_metadata + rejected_clouds + failed_scans;
   }
-};
-
-// Lets one message through per period, timed by the steady clock: the ROS
-// *_THROTTLE macros use ROS time, which stands still in a paused replay or
-// before a bag's clock starts, and then never log at all.
-class SteadyThrottle {
- public:
-  bool allow(double period_s) {
-    const ros::SteadyTime now = ros::SteadyTime::now();
-    if (!last_.isZero() && (now - last_).toSec() < period_s) return false;
-    last_ = now;
-    return true;
-  }
-
- private:
-  ros::SteadyTime last_;
 };
 
 void accumulate(BatcherStatistics& total, const BatcherStatistics& part) {

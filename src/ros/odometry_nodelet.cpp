@@ -8,6 +8,7 @@
 #include "range_image_mapping/LidarRangeImage.h"
 #include "range_image_mapping/registration/lidar_odometry.h"
 #include "range_image_mapping/ros/parameters.h"
+#include "range_image_mapping/ros/steady_throttle.h"
 #include "range_image_mapping/ros/range_image_conversions.h"
 
 #include <diagnostic_updater/diagnostic_updater.h>
@@ -86,21 +87,6 @@ struct StatisticsWindow {
     started = time;
     return {window, period};
   }
-};
-
-// Lets one message through per period, timed by the steady clock (ROS time
-// stands still in a paused replay).
-class SteadyThrottle {
- public:
-  bool allow(double period_s) {
-    const ros::SteadyTime now = ros::SteadyTime::now();
-    if (!last_.isZero() && (now - last_).toSec() < period_s) return false;
-    last_ = now;
-    return true;
-  }
-
- private:
-  ros::SteadyTime last_;
 };
 
 // Covariance of a perturbation in the lidar frame, core order [rotation,
