@@ -101,6 +101,18 @@ TEST_P(SimulatedRegistration, RecoversTheRelativePoseFromIdentity) {
   EXPECT_LT(error.rotation_deg, 0.1);
   EXPECT_GT(result.inliers, 5000u);
   EXPECT_TRUE(std::isfinite(result.condition_number));
+
+  // A refinement from the result at the finest level only (as the odometry's
+  // re-deskew passes do) keeps the pose and runs that level alone.
+  VertexNormalMap source_map;
+  computeVertexNormalMap(source.image, 1, options.normals, source_map);
+  const RegistrationResult refined =
+      icp.align(source_map, result.target_from_source, options.strides.size() - 1);
+  const PoseError refined_error = poseError(refined.target_from_source, truth);
+  EXPECT_LT(refined_error.translation_m, 0.01);
+  EXPECT_LT(refined_error.rotation_deg, 0.1);
+  EXPECT_LE(refined.iterations, options.iterations.back());
+  EXPECT_GT(refined.inliers, 5000u);
 }
 
 INSTANTIATE_TEST_SUITE_P(

@@ -85,6 +85,11 @@ LidarOdometry::LidarOdometry(OdometryOptions options)
   if (!(options_.max_condition_number > 1.0))
     throw std::invalid_argument("odometry: max_condition_number must be above 1, not " +
                                 std::to_string(options_.max_condition_number));
+  if (options_.deskew_passes < 0)
+    throw std::invalid_argument("odometry: deskew_passes must not be negative, not " +
+                                std::to_string(options_.deskew_passes));
+  if (!(options_.deskew_convergence_rad >= 0.0) || !(options_.deskew_convergence_m >= 0.0))
+    throw std::invalid_argument("odometry: deskew convergence thresholds must not be negative");
   if (options_.keyframe_distance_m < 0.0 || options_.keyframe_angle_rad < 0.0)
     throw std::invalid_argument("odometry: keyframe distance and angle must not be negative");
 }
@@ -149,7 +154,36 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input) {
   const Eigen::Isometry3d guess = target_from_previous * prior_step;
   computeVertexNormalMap(scan, 1, options_.registration.normals, measured_);
   deskew(scan, stamp, options_.deskew ? prior_twist : Vector6d::Zero());
-  const RegistrationResult result = icp_.align(deskewed_, guess);
+  RegistrationResult result = icp_.align(deskewed_, guess);
+  // The prior's twist is one step late: wrong where the motion changes (a
+  // turn's start, vibration), and the source deskewed with it warped. Deskew
+  // again with the velocity the registration measured and register again at
+  // the finest level, until the pose settles. The measured velocity
+  // overshoots the true one, opposite to the deskew error and by about half
+  // of it (the registration fits the scan's average warp), so the next
+  // deskew blends it with the one used: plain substitution oscillates and
+  // converges slowly, extrapolation diverges. Only against a deskewed target:
+  // a source deskewed to a target that is not (the first after a restart)
+  // would be registered to a different shape.
+  constexpr double kMeasuredTwistShare = 0.6;
+  Vector6d deskew_twist = options_.deskew ? prior_twist : Vector6d::Zero();
+  for (int pass = 0; pass < options_.deskew_passes && target_deskewed_ && isFinite(result.target_from_source) &&
+                     result.inliers >= options_.min_inliers;
+       ++pass) {
+    const Vector6d measured_twist =
+        logarithm(pose_.inverse() * keyframe_pose_ * result.target_from_source) / dt;
+    deskew_twist = kMeasuredTwistShare * measured_twist + (1.0 - kMeasuredTwistShare) * deskew_twist;
+    deskew(scan, stamp, deskew_twist);
+    const Eigen::Isometry3d before = result.target_from_source;
+    const int iterations = result.iterations;
+    result = icp_.align(deskewed_, before, options_.registration.strides.size() - 1);
+    result.iterations += iterations;
+    const Vector6d change = logarithm(before.inverse() * result.target_from_source);
+    if (!isFinite(result.target_from_source) ||
+        (change.head<3>().norm() < options_.deskew_convergence_rad &&
+         change.tail<3>().norm() < options_.deskew_convergence_m))
+      break;
+  }
   update.inliers = result.inliers;
   update.iterations = result.iterations;
   update.condition_number = result.condition_number;
@@ -195,6 +229,7 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input) {
        Eigen::AngleAxisd(from_keyframe.linear()).angle() >= options_.keyframe_angle_rad);
   if (new_keyframe) {
     makeTarget(scan, deskewed);
+    target_deskewed_ = deskewed;
     keyframe_pose_ = pose_;
   }
   return finish();
@@ -205,6 +240,7 @@ void LidarOdometry::restart(const RangeImage& scan, uint64_t stamp_ns) {
   computeVertexNormalMap(scan, 1, options_.registration.normals, measured_);
   deskewed_ = measured_;
   makeTarget(scan, false);
+  target_deskewed_ = false;
   keyframe_pose_ = pose_;
   last_stamp_ns_ = stamp_ns;
   has_target_ = true;

@@ -176,7 +176,8 @@ RegistrationResult ProjectiveIcp::align(const RangeImage& source,
 }
 
 RegistrationResult ProjectiveIcp::align(const VertexNormalMap& source,
-                                        const Eigen::Isometry3d& initial_target_from_source) const {
+                                        const Eigen::Isometry3d& initial_target_from_source,
+                                        std::size_t first_level) const {
   if (!target_model_) throw std::runtime_error("ProjectiveIcp::align: no target; call setTarget first");
   if (!initial_target_from_source.matrix().allFinite()) {
     throw std::invalid_argument("ProjectiveIcp::align: the initial pose is not finite");
@@ -191,7 +192,8 @@ RegistrationResult ProjectiveIcp::align(const VertexNormalMap& source,
   RegistrationResult result;
   result.target_from_source = initial_target_from_source;
   NormalEquations last;
-  for (std::size_t level = 0; level < options_.strides.size(); ++level) {
+  for (std::size_t level = std::min(first_level, options_.strides.size() - 1); level < options_.strides.size();
+       ++level) {
     // The source at the same spacing as the target level.
     const int step = std::max(1, options_.strides[level] / source.stride) * options_.source_stride;
     source_points_.clear();

@@ -17,6 +17,13 @@ struct OdometryOptions {
   RegistrationOptions registration;
   bool deskew = true;
   bool constant_velocity_prior = true;
+  // At most this many times the source is deskewed again with the velocity
+  // its registration gave, then registered again at the finest level (0:
+  // deskewed with the previous step's velocity only).
+  int deskew_passes = 10;
+  // ... until a pass moves the pose by less than these.
+  double deskew_convergence_rad = 1e-5;
+  double deskew_convergence_m = 1e-4;
   // Degenerate when the hessian's condition number exceeds this or fewer pairs
   // than min_inliers remain: the motion prior is used instead, and reported.
   double max_condition_number = 1e6;
@@ -53,7 +60,8 @@ struct OdometryUpdate {
 // Scan time: the image's stamp_ns, or its first valid column's timestamp when
 // the stamp is 0. Each column's points are moved to that time with the
 // constant-velocity motion T(t) = exp((t - t0) * twist) (body-frame twist of
-// the last registered step); columns without a timestamp are left in place.
+// the last registered step, then refined: see deskew_passes); columns without
+// a timestamp are left in place.
 // After registration the scan is deskewed again with the new velocity, and
 // is the next target (its pyramid's points moved and filed under the pixels
 // they now project to, their coordinates kept exact).
@@ -88,6 +96,7 @@ class LidarOdometry {
   Eigen::Isometry3d keyframe_pose_ = Eigen::Isometry3d::Identity();  // T_odom_target
   Eigen::Matrix<double, 6, 1> twist_ = Eigen::Matrix<double, 6, 1>::Zero();  // [angular, linear], body frame
   bool has_target_ = false;
+  bool target_deskewed_ = false;
   uint64_t last_stamp_ns_ = 0;
   // Reused buffers: the scan's points as measured, deskewed, and the target.
   VertexNormalMap measured_, deskewed_;

@@ -70,9 +70,11 @@ class ProjectiveIcp {
   // Source points in their own lidar frame (e.g. deskewed), with normals;
   // pixels without a normal are not used. At level s the source is read every
   // s * source_stride pixels. Throws std::runtime_error without a target,
-  // std::invalid_argument for a non-finite initial pose.
+  // std::invalid_argument for a non-finite initial pose. Levels before
+  // first_level are skipped (a refinement from an already close pose).
   RegistrationResult align(const VertexNormalMap& source_full_resolution,
-                           const Eigen::Isometry3d& initial_target_from_source) const;
+                           const Eigen::Isometry3d& initial_target_from_source,
+                           std::size_t first_level = 0) const;
   // Convenience: computes the source map itself.
   RegistrationResult align(const RangeImage& source, const Eigen::Isometry3d& initial_target_from_source) const;
 
