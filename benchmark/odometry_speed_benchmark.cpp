@@ -68,11 +68,7 @@ int run(int argc, char** argv) {
     json = source + "/metadata.json";
   }
   const OusterMetadata metadata = loadOusterMetadata(json);
-  const auto model = std::make_shared<const LidarModel>(metadata.intrinsics);
-  std::vector<RangeImage> frames;
-  io::readOusterScans(pcap, metadata, [&](const LidarScan& scan) {
-    if (scan.receivedColumns() > 0) frames.push_back(toRangeImage(scan, model));
-  });
+  std::vector<RangeImage> frames = io::readOusterRangeImages(pcap, metadata);
   if (frames.size() < 2) {
     std::fprintf(stderr, "%s: %zu scans decoded, need at least 2\n", source.c_str(), frames.size());
     return 1;

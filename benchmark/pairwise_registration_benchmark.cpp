@@ -117,11 +117,7 @@ int run(int argc, char** argv) {
   }
 
   const OusterMetadata metadata = loadOusterMetadata(directory + "/metadata.json");
-  const auto model = std::make_shared<const LidarModel>(metadata.intrinsics);
-  std::vector<RangeImage> frames;
-  io::readOusterScans(directory + "/capture.pcap", metadata, [&](const LidarScan& scan) {
-    if (scan.receivedColumns() > 0) frames.push_back(toRangeImage(scan, model));
-  });
+  const std::vector<RangeImage> frames = io::readOusterRangeImages(directory + "/capture.pcap", metadata);
   const std::vector<io::StampedPose> poses = io::readPoseFile(directory + "/poses_tum.txt");
   if (frames.size() != poses.size()) {
     std::fprintf(stderr, "%s: %zu scans decoded but %zu ground-truth poses\n", directory.c_str(), frames.size(),

@@ -83,11 +83,7 @@ int run() {
     return 1;
   }
   const OusterMetadata metadata = loadOusterMetadata(json);
-  const auto model = std::make_shared<const LidarModel>(metadata.intrinsics);
-  std::vector<RangeImage> frames;
-  io::readOusterScans(pcap, metadata, [&](const LidarScan& scan) {
-    if (scan.receivedColumns() > 0) frames.push_back(toRangeImage(scan, model));
-  });
+  std::vector<RangeImage> frames = io::readOusterRangeImages(pcap, metadata);
   if (frames.size() < 2) {
     std::fprintf(stderr, "lb_n3 decoded into %zu frames, expected 3\n", frames.size());
     return 1;

@@ -36,13 +36,7 @@ const Capture kCaptures[] = {
 
 std::vector<RangeImage> decodeCapture(const std::string& pcap, const std::string& metadata_path,
                                       ReturnIndex which = ReturnIndex::kFirst) {
-  const OusterMetadata metadata = loadOusterMetadata(metadata_path);
-  const auto model = std::make_shared<const LidarModel>(metadata.intrinsics);
-  std::vector<RangeImage> images;
-  io::readOusterScans(pcap, metadata, [&](const LidarScan& scan) {
-    if (scan.receivedColumns() > 0) images.push_back(toRangeImage(scan, model, which));
-  });
-  return images;
+  return io::readOusterRangeImages(pcap, loadOusterMetadata(metadata_path), which);
 }
 
 class RealCaptureRoundTrip : public ::testing::TestWithParam<Capture> {};

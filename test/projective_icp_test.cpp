@@ -157,11 +157,7 @@ TEST(RealRegistration, OusterLbN3AgainstReferencePoses) {
   RIM_REQUIRE_DATA(metadata_path, "ouster-pcaps/OS-1-128_v2.3.0_1024x10.json");
   RIM_REQUIRE_DATA(poses_path, "ouster-pcaps/OS-1-128_v2.3.0_1024x10_lb_n3_poses_kitti.txt");
   const OusterMetadata metadata = loadOusterMetadata(metadata_path);
-  const auto model = std::make_shared<const LidarModel>(metadata.intrinsics);
-  std::vector<RangeImage> frames;
-  io::readOusterScans(pcap, metadata, [&](const LidarScan& scan) {
-    if (scan.receivedColumns() > 0) frames.push_back(toRangeImage(scan, model));
-  });
+  std::vector<RangeImage> frames = io::readOusterRangeImages(pcap, metadata);
   ASSERT_EQ(frames.size(), 3u);
   const std::vector<Eigen::Isometry3d> sensor_poses = io::readKittiPoses(poses_path);
   ASSERT_EQ(sensor_poses.size(), 3u);

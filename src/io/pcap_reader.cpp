@@ -351,4 +351,14 @@ OusterPcapStatistics readOusterScans(const std::string& pcap_path, const OusterM
   return statistics;
 }
 
+std::vector<RangeImage> readOusterRangeImages(const std::string& pcap_path, const OusterMetadata& metadata,
+                                              ReturnIndex which) {
+  const auto model = std::make_shared<const LidarModel>(metadata.intrinsics);
+  std::vector<RangeImage> images;
+  readOusterScans(pcap_path, metadata, [&](const LidarScan& scan) {
+    if (scan.receivedColumns() > 0) images.push_back(toRangeImage(scan, model, which));
+  });
+  return images;
+}
+
 }  // namespace range_image_mapping::io

@@ -12,6 +12,7 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace range_image_mapping::io {
 
@@ -81,5 +82,10 @@ struct OusterPcapStatistics {
 // flushed at the end. Throws PcapError for files that cannot be read.
 OusterPcapStatistics readOusterScans(const std::string& pcap_path, const OusterMetadata& metadata,
                                      const ScanBatcher::ScanCallback& on_scan);
+
+// Every scan of a capture that has any column, as range images sharing one
+// model of the metadata. Throws like readOusterScans.
+std::vector<RangeImage> readOusterRangeImages(const std::string& pcap_path, const OusterMetadata& metadata,
+                                              ReturnIndex which = ReturnIndex::kFirst);
 
 }  // namespace range_image_mapping::io
