@@ -45,6 +45,12 @@ std::string ParameterReader::getString(const std::string& name,
   return static_cast<std::string>(value);
 }
 
+std::string ParameterReader::getFrame(const std::string& name, const std::string& default_value) const {
+  std::string frame = getString(name, default_value);
+  if (frame.empty()) throw ParameterError("parameter " + fullName(name) + " is empty");
+  return frame;
+}
+
 std::string ParameterReader::getChoice(const std::string& name, const std::string& default_value,
                                        const std::vector<std::string>& choices) const {
   const std::string value = getString(name, default_value);
@@ -132,12 +138,8 @@ AdapterParameters readAdapterParameters(const ros::NodeHandle& private_node) {
                          ? AdapterInput::kPointCloud
                          : AdapterInput::kOusterPackets;
   parameters.metadata_file = reader.getString("metadata_file", defaults.metadata_file);
-  parameters.lidar_frame = reader.getString("lidar_frame", defaults.lidar_frame);
-  parameters.sensor_frame = reader.getString("sensor_frame", defaults.sensor_frame);
-  if (parameters.lidar_frame.empty())
-    throw ParameterError("parameter " + private_node.resolveName("lidar_frame") + " is empty");
-  if (parameters.sensor_frame.empty())
-    throw ParameterError("parameter " + private_node.resolveName("sensor_frame") + " is empty");
+  parameters.lidar_frame = reader.getFrame("lidar_frame", defaults.lidar_frame);
+  parameters.sensor_frame = reader.getFrame("sensor_frame", defaults.sensor_frame);
   parameters.publish_static_tf = reader.getBool("publish_static_tf", defaults.publish_static_tf);
   parameters.publish_cloud = reader.getBool("publish_cloud", defaults.publish_cloud);
 
@@ -229,12 +231,8 @@ OdometryParameters readOdometryParameters(const ros::NodeHandle& private_node) {
   OdometryParameters parameters;
   const OdometryParameters defaults;
 
-  parameters.odom_frame = reader.getString("odom_frame", defaults.odom_frame);
-  parameters.base_frame = reader.getString("base_frame", defaults.base_frame);
-  if (parameters.odom_frame.empty())
-    throw ParameterError("parameter " + private_node.resolveName("odom_frame") + " is empty");
-  if (parameters.base_frame.empty())
-    throw ParameterError("parameter " + private_node.resolveName("base_frame") + " is empty");
+  parameters.odom_frame = reader.getFrame("odom_frame", defaults.odom_frame);
+  parameters.base_frame = reader.getFrame("base_frame", defaults.base_frame);
   if (parameters.odom_frame == parameters.base_frame)
     throw ParameterError("parameters " + private_node.resolveName("odom_frame") + " and " +
                          private_node.resolveName("base_frame") + " are both '" + parameters.odom_frame + "'");

@@ -25,6 +25,8 @@ class ParameterReader {
   explicit ParameterReader(const ros::NodeHandle& node) : node_(node) {}
 
   std::string getString(const std::string& name, const std::string& default_value) const;
+  // A tf frame name: a string that must not be empty.
+  std::string getFrame(const std::string& name, const std::string& default_value) const;
   // One of choices, compared exactly.
   std::string getChoice(const std::string& name, const std::string& default_value,
                         const std::vector<std::string>& choices) const;
