@@ -1,5 +1,7 @@
 #include "range_image_mapping/registration/lidar_odometry.h"
 
+#include "range_image_mapping/scan_motion.h"
+
 #include <Eigen/LU>
 #include <tbb/parallel_for.h>
 
@@ -11,62 +13,10 @@
 namespace range_image_mapping::registration {
 namespace {
 
-using Vector6d = Eigen::Matrix<double, 6, 1>;
+using Vector6d = Twist;
 using Matrix6d = Eigen::Matrix<double, 6, 6>;
 
-Eigen::Matrix3d skew(const Eigen::Vector3d& v) {
-  Eigen::Matrix3d m;
-  m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
-  return m;
-}
-
-// SE(3) exponential of a twist [angular, linear]: the pose reached after one
-// unit of time at that constant body-frame velocity.
-Eigen::Isometry3d exponential(const Vector6d& twist) {
-  const Eigen::Vector3d omega = twist.head<3>(), v = twist.tail<3>();
-  const double angle = omega.norm();
-  const Eigen::Matrix3d w = skew(omega);
-  Eigen::Matrix3d left_jacobian = Eigen::Matrix3d::Identity();
-  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-  if (angle < 1e-9) {
-    left_jacobian += 0.5 * w;
-    pose.linear() = Eigen::Matrix3d::Identity() + w;
-  } else {
-    left_jacobian += (1.0 - std::cos(angle)) / (angle * angle) * w +
-                     (angle - std::sin(angle)) / (angle * angle * angle) * w * w;
-    pose.linear() = Eigen::AngleAxisd(angle, omega / angle).toRotationMatrix();
-  }
-  pose.translation() = left_jacobian * v;
-  return pose;
-}
-
-// Inverse of exponential() for rotations below pi.
-Vector6d logarithm(const Eigen::Isometry3d& pose) {
-  const Eigen::AngleAxisd rotation(pose.linear());
-  const Eigen::Vector3d omega = rotation.angle() * rotation.axis();
-  const double angle = rotation.angle();
-  const Eigen::Matrix3d w = skew(omega);
-  Eigen::Matrix3d inverse_left_jacobian = Eigen::Matrix3d::Identity() - 0.5 * w;
-  if (angle > 1e-9)
-    inverse_left_jacobian += (1.0 - angle * std::sin(angle) / (2.0 * (1.0 - std::cos(angle)))) /
-                             (angle * angle) * w * w;
-  Vector6d twist;
-  twist << omega, inverse_left_jacobian * pose.translation();
-  return twist;
-}
-
 bool isFinite(const Eigen::Isometry3d& pose) { return pose.matrix().allFinite(); }
-
-// First column with a nonzero timestamp that holds a valid range.
-uint64_t firstValidColumnTimestamp(const RangeImage& scan) {
-  if (scan.column_timestamp_ns.size() != std::size_t(scan.columns())) return 0;
-  for (int u = 0; u < scan.columns(); ++u) {
-    if (scan.column_timestamp_ns[u] == 0) continue;
-    for (int v = 0; v < scan.rows(); ++v)
-      if (scan.valid(v, u)) return scan.column_timestamp_ns[u];
-  }
-  return 0;
-}
 
 std::string seconds(double value) {
   std::ostringstream text;
@@ -125,7 +75,7 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input) {
                 std::to_string(input.rows()) + " x " + std::to_string(input.columns()) + " model");
   const RangeImage& scan = input.column_order == ColumnOrder::kStaggered ? input : (staggered_ = input.staggered());
   if (scan.validCount() == 0) return skip("range image without a single valid range");
-  const uint64_t stamp = scan.stamp_ns != 0 ? scan.stamp_ns : firstValidColumnTimestamp(scan);
+  const uint64_t stamp = scanTime(scan);
   update.stamp_ns = stamp;
 
   if (!has_target_) {
@@ -149,7 +99,7 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input) {
 
   // Constant-velocity prior, deskewed source, registration to the target.
   const Vector6d prior_twist = options_.constant_velocity_prior ? twist_ : Vector6d::Zero();
-  const Eigen::Isometry3d prior_step = exponential(dt * prior_twist);  // T_previous_current
+  const Eigen::Isometry3d prior_step = twistExponential(dt * prior_twist);  // T_previous_current
   const Eigen::Isometry3d target_from_previous = keyframe_pose_.inverse() * pose_;
   const Eigen::Isometry3d guess = target_from_previous * prior_step;
   computeVertexNormalMap(scan, 1, options_.registration.normals, measured_);
@@ -171,14 +121,14 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input) {
                      result.inliers >= options_.min_inliers;
        ++pass) {
     const Vector6d measured_twist =
-        logarithm(pose_.inverse() * keyframe_pose_ * result.target_from_source) / dt;
+        twistLogarithm(pose_.inverse() * keyframe_pose_ * result.target_from_source) / dt;
     deskew_twist = kMeasuredTwistShare * measured_twist + (1.0 - kMeasuredTwistShare) * deskew_twist;
     deskew(scan, stamp, deskew_twist);
     const Eigen::Isometry3d before = result.target_from_source;
     const int iterations = result.iterations;
     result = icp_.align(deskewed_, before, options_.registration.strides.size() - 1);
     result.iterations += iterations;
-    const Vector6d change = logarithm(before.inverse() * result.target_from_source);
+    const Vector6d change = twistLogarithm(before.inverse() * result.target_from_source);
     if (!isFinite(result.target_from_source) ||
         (change.head<3>().norm() < options_.deskew_convergence_rad &&
          change.tail<3>().norm() < options_.deskew_convergence_m))
@@ -213,12 +163,12 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input) {
     }
   }
   const Eigen::Isometry3d pose = keyframe_pose_ * target_from_current;
-  if (!update.degenerate) twist_ = logarithm(pose_.inverse() * pose) / dt;
+  if (!update.degenerate) twist_ = twistLogarithm(pose_.inverse() * pose) / dt;
   pose_ = pose;
   last_stamp_ns_ = stamp;
 
   // The next target: this scan deskewed with the velocity just estimated.
-  const bool deskewed = options_.deskew && computeColumnMotion(scan, stamp, twist_);
+  const bool deskewed = options_.deskew && computeColumnMotion(scan, stamp, twist_, column_motion_);
   if (deskewed) moveColumns(measured_, deskewed_);
   const Eigen::Isometry3d from_keyframe = keyframe_pose_.inverse() * pose_;
   const bool keyframes = options_.keyframe_distance_m > 0.0 || options_.keyframe_angle_rad > 0.0;
@@ -246,18 +196,6 @@ void LidarOdometry::restart(const RangeImage& scan, uint64_t stamp_ns) {
   has_target_ = true;
 }
 
-bool LidarOdometry::computeColumnMotion(const RangeImage& scan, uint64_t stamp_ns, const Vector6d& twist) {
-  const int columns = scan.columns();
-  if (twist.isZero() || scan.column_timestamp_ns.size() != std::size_t(columns)) return false;
-  column_motion_.resize(columns);
-  for (int u = 0; u < columns; ++u) {
-    const uint64_t time = scan.column_timestamp_ns[u];
-    const double offset = time == 0 ? 0.0 : (double(time) - double(stamp_ns)) * 1e-9;
-    column_motion_[u] = exponential(offset * twist).matrix().topRows<3>().cast<float>();
-  }
-  return true;
-}
-
 // Each column's points and normals, measured at the column's time, moved into
 // the lidar frame at the scan time: p0 = exp((t - t0) * twist) * p. Pixel
 // (i, j) of a level of stride s is full-resolution column s * j.
@@ -281,7 +219,7 @@ void LidarOdometry::moveColumns(const VertexNormalMap& measured, VertexNormalMap
 }
 
 void LidarOdometry::deskew(const RangeImage& scan, uint64_t stamp_ns, const Vector6d& twist) {
-  if (computeColumnMotion(scan, stamp_ns, twist))
+  if (computeColumnMotion(scan, stamp_ns, twist, column_motion_))
     moveColumns(measured_, deskewed_);
   else
     deskewed_ = measured_;

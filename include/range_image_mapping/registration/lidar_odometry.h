@@ -4,6 +4,7 @@
 #pragma once
 
 #include "range_image_mapping/registration/projective_icp.h"
+#include "range_image_mapping/scan_motion.h"
 
 #include <Eigen/Geometry>
 
@@ -83,8 +84,6 @@ class LidarOdometry {
 
  private:
   void restart(const RangeImage& scan, uint64_t stamp_ns);
-  // Fills column_motion_; false when there is nothing to move (no twist, no column times).
-  bool computeColumnMotion(const RangeImage& scan, uint64_t stamp_ns, const Eigen::Matrix<double, 6, 1>& twist);
   void moveColumns(const VertexNormalMap& measured, VertexNormalMap& moved) const;
   // deskewed_ from measured_ (which must hold the scan's map).
   void deskew(const RangeImage& scan, uint64_t stamp_ns, const Eigen::Matrix<double, 6, 1>& twist);
@@ -100,7 +99,7 @@ class LidarOdometry {
   uint64_t last_stamp_ns_ = 0;
   // Reused buffers: the scan's points as measured, deskewed, and the target.
   VertexNormalMap measured_, deskewed_;
-  std::vector<Eigen::Matrix<float, 3, 4>> column_motion_;  // per column: [R | t] to the scan time
+  std::vector<ColumnMotion> column_motion_;  // per column: [R | t] to the scan time
   std::vector<ProjectedPixel> pixels_;  // target points re-filed by pixel
   std::vector<uint8_t> hits_;
   VertexNormalMap filed_;

@@ -1,0 +1,38 @@
+// Rigid motion of a sensor during one sweep: SE(3) exponential and logarithm
+// of a body-frame twist, the scan time, and the per-column transforms that
+// move each column's points to the scan time (deskew). Shared by the odometry
+// (deskewing points) and the TSDF integrator (projecting voxels into a moving
+// sensor), so both agree on what a twist means.
+#pragma once
+
+#include "range_image_mapping/range_image.h"
+
+#include <Eigen/Geometry>
+
+#include <cstdint>
+#include <vector>
+
+namespace range_image_mapping {
+
+using Twist = Eigen::Matrix<double, 6, 1>;  // [angular rad/s, linear m/s], body frame
+
+// SE(3) exponential: the pose reached after one unit of time at this constant
+// body-frame velocity.
+Eigen::Isometry3d twistExponential(const Twist& twist);
+// Inverse of twistExponential() for rotations below pi.
+Twist twistLogarithm(const Eigen::Isometry3d& pose);
+
+// The image's stamp_ns, or its first valid column's timestamp when the stamp
+// is 0 (design.md: scan time); 0 when there is neither.
+uint64_t scanTime(const RangeImage& scan);
+
+// Per column u, [R | t] = exp((t_u - t0) * twist): a point measured in the
+// lidar frame at the column's time, in the lidar frame at the scan time t0.
+// Columns without a timestamp get the identity. Returns false (and leaves
+// `motion` untouched) when there is nothing to move: a zero twist or no column
+// times.
+using ColumnMotion = Eigen::Matrix<float, 3, 4>;
+bool computeColumnMotion(const RangeImage& scan, uint64_t scan_time_ns, const Twist& twist,
+                         std::vector<ColumnMotion>& motion);
+
+}  // namespace range_image_mapping
