@@ -22,6 +22,11 @@ Eigen::Isometry3d twistExponential(const Twist& twist);
 // Inverse of twistExponential() for rotations below pi.
 Twist twistLogarithm(const Eigen::Isometry3d& pose);
 
+// The constant body twist that moves `previous` to `current` in dt_s seconds:
+// log(previous^-1 current) / dt_s; zero when dt_s is not positive. How poses
+// given at scan times (a pose file, tf) yield the motion within a sweep.
+Twist twistBetween(const Eigen::Isometry3d& previous, const Eigen::Isometry3d& current, double dt_s);
+
 // The image's stamp_ns, or its first valid column's timestamp when the stamp
 // is 0 (design.md: scan time); 0 when there is neither.
 uint64_t scanTime(const RangeImage& scan);

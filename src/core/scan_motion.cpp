@@ -45,6 +45,11 @@ Twist twistLogarithm(const Eigen::Isometry3d& pose) {
   return twist;
 }
 
+Twist twistBetween(const Eigen::Isometry3d& previous, const Eigen::Isometry3d& current, double dt_s) {
+  if (!(dt_s > 0.0)) return Twist::Zero();
+  return twistLogarithm(previous.inverse() * current) / dt_s;
+}
+
 uint64_t scanTime(const RangeImage& scan) {
   if (scan.stamp_ns != 0) return scan.stamp_ns;
   if (scan.column_timestamp_ns.size() != std::size_t(scan.columns())) return 0;

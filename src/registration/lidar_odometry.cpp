@@ -121,7 +121,7 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input) {
                      result.inliers >= options_.min_inliers;
        ++pass) {
     const Vector6d measured_twist =
-        twistLogarithm(pose_.inverse() * keyframe_pose_ * result.target_from_source) / dt;
+        twistBetween(pose_, keyframe_pose_ * result.target_from_source, dt);
     deskew_twist = kMeasuredTwistShare * measured_twist + (1.0 - kMeasuredTwistShare) * deskew_twist;
     deskew(scan, stamp, deskew_twist);
     const Eigen::Isometry3d before = result.target_from_source;
@@ -163,7 +163,7 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input) {
     }
   }
   const Eigen::Isometry3d pose = keyframe_pose_ * target_from_current;
-  if (!update.degenerate) twist_ = twistLogarithm(pose_.inverse() * pose) / dt;
+  if (!update.degenerate) twist_ = twistBetween(pose_, pose, dt);
   pose_ = pose;
   last_stamp_ns_ = stamp;
 
