@@ -359,6 +359,36 @@ void appendPoint(std::string& buffer, const Eigen::Vector3f& point) {
   for (int axis = 0; axis < 3; ++axis) appendLittleEndian(buffer, point[axis]);
 }
 
+// The header lines of the extra per-vertex properties; throws
+// std::invalid_argument (naming `writer`) for an empty, spaced or repeated
+// name, or a value count other than one per vertex.
+std::string extraPropertyHeader(const char* writer, const std::vector<PlyProperty>& properties,
+                                std::size_t vertex_count, std::vector<std::string> names) {
+  std::ostringstream header;
+  for (const PlyProperty& property : properties) {
+    if (property.name.empty() || property.name.find_first_of(" \t\r\n") != std::string::npos)
+      throw std::invalid_argument(std::string(writer) + ": property name \"" + property.name +
+                                  "\" is empty or has white space");
+    if (std::find(names.begin(), names.end(), property.name) != names.end())
+      throw std::invalid_argument(std::string(writer) + ": property \"" + property.name +
+                                  "\" appears twice");
+    names.push_back(property.name);
+    if (propertySize(property) != vertex_count)
+      throw std::invalid_argument(std::string(writer) + ": property \"" + property.name +
+                                  "\" has " + std::to_string(propertySize(property)) +
+                                  " values for " + std::to_string(vertex_count) + " vertices");
+    header << "property " << plyTypeName(property) << ' ' << property.name << '\n';
+  }
+  return header.str();
+}
+
+void appendExtraProperties(std::string& buffer, const std::vector<PlyProperty>& properties,
+                           std::size_t vertex) {
+  for (const PlyProperty& property : properties)
+    std::visit([&](const auto& values) { appendLittleEndian(buffer, values[vertex]); },
+               property.values);
+}
+
 // Writes in pieces so large clouds never need a second full copy in memory.
 class BinaryFileWriter {
  public:
@@ -394,29 +424,13 @@ void writePlyPointCloud(const std::string& path, const std::vector<Eigen::Vector
   std::ostringstream header;
   header << "ply\nformat binary_little_endian 1.0\nelement vertex " << points.size()
          << "\nproperty float x\nproperty float y\nproperty float z\n";
-  std::vector<std::string> names{"x", "y", "z"};
-  for (const PlyProperty& property : properties) {
-    if (property.name.empty() || property.name.find_first_of(" \t\r\n") != std::string::npos)
-      throw std::invalid_argument("writePlyPointCloud: property name \"" + property.name +
-                                  "\" is empty or has white space");
-    if (std::find(names.begin(), names.end(), property.name) != names.end())
-      throw std::invalid_argument("writePlyPointCloud: property \"" + property.name +
-                                  "\" appears twice");
-    names.push_back(property.name);
-    if (propertySize(property) != points.size())
-      throw std::invalid_argument("writePlyPointCloud: property \"" + property.name + "\" has " +
-                                  std::to_string(propertySize(property)) + " values for " +
-                                  std::to_string(points.size()) + " points");
-    header << "property " << plyTypeName(property) << ' ' << property.name << '\n';
-  }
+  header << extraPropertyHeader("writePlyPointCloud", properties, points.size(), {"x", "y", "z"});
   header << "end_header\n";
 
   BinaryFileWriter writer(path, header.str());
   for (std::size_t i = 0; i < points.size(); ++i) {
     appendPoint(writer.buffer(), points[i]);
-    for (const PlyProperty& property : properties)
-      std::visit([&](const auto& values) { appendLittleEndian(writer.buffer(), values[i]); },
-                 property.values);
+    appendExtraProperties(writer.buffer(), properties, i);
     writer.flushIfLarge();
   }
   writer.finish();
@@ -425,6 +439,13 @@ void writePlyPointCloud(const std::string& path, const std::vector<Eigen::Vector
 void writePlyMesh(const std::string& path, const std::vector<Eigen::Vector3f>& vertices,
                   const std::vector<Eigen::Vector3f>& normals,
                   const std::vector<Eigen::Vector3i>& triangles) {
+  writePlyMesh(path, vertices, normals, triangles, {});
+}
+
+void writePlyMesh(const std::string& path, const std::vector<Eigen::Vector3f>& vertices,
+                  const std::vector<Eigen::Vector3f>& normals,
+                  const std::vector<Eigen::Vector3i>& triangles,
+                  const std::vector<PlyProperty>& vertex_properties) {
   if (!normals.empty() && normals.size() != vertices.size())
     throw std::invalid_argument("writePlyMesh: " + std::to_string(normals.size()) +
                                 " normals for " + std::to_string(vertices.size()) + " vertices");
@@ -439,6 +460,8 @@ void writePlyMesh(const std::string& path, const std::vector<Eigen::Vector3f>& v
   header << "ply\nformat binary_little_endian 1.0\nelement vertex " << vertices.size()
          << "\nproperty float x\nproperty float y\nproperty float z\n";
   if (!normals.empty()) header << "property float nx\nproperty float ny\nproperty float nz\n";
+  header << extraPropertyHeader("writePlyMesh", vertex_properties, vertices.size(),
+                                {"x", "y", "z", "nx", "ny", "nz"});
   header << "element face " << triangles.size()
          << "\nproperty list uchar int vertex_indices\nend_header\n";
 
@@ -446,6 +469,7 @@ void writePlyMesh(const std::string& path, const std::vector<Eigen::Vector3f>& v
   for (std::size_t i = 0; i < vertices.size(); ++i) {
     appendPoint(writer.buffer(), vertices[i]);
     if (!normals.empty()) appendPoint(writer.buffer(), normals[i]);
+    appendExtraProperties(writer.buffer(), vertex_properties, i);
     writer.flushIfLarge();
   }
   for (const Eigen::Vector3i& triangle : triangles) {

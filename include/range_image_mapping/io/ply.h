@@ -36,6 +36,12 @@ void writePlyPointCloud(const std::string& path, const std::vector<Eigen::Vector
 void writePlyMesh(const std::string& path, const std::vector<Eigen::Vector3f>& vertices,
                   const std::vector<Eigen::Vector3f>& normals,
                   const std::vector<Eigen::Vector3i>& triangles);
+// The same with extra per-vertex properties after the normals (e.g. a TSDF
+// mesh's "intensity"), checked as writePlyPointCloud checks its properties.
+void writePlyMesh(const std::string& path, const std::vector<Eigen::Vector3f>& vertices,
+                  const std::vector<Eigen::Vector3f>& normals,
+                  const std::vector<Eigen::Vector3i>& triangles,
+                  const std::vector<PlyProperty>& vertex_properties);
 
 // Vertex x, y, z of an ASCII or binary little-endian PLY (any scalar type,
 // converted to float); other properties and elements are skipped.

@@ -1,7 +1,10 @@
 // Marching cubes over a voxel block grid: the zero crossing of the TSDF as a
 // triangle mesh with welded vertices and normals from the SDF gradient.
 // Cubes that span a block border read the neighbouring blocks, so there are
-// no cracks. Incremental: a MeshExtractor re-meshes only the blocks changed
+// no cracks: ambiguous faces are resolved by the asymptotic decider, which
+// reads only the face, so both cubes of a face agree (the case table is
+// generated from the cube's topology, src/mapping/marching_cubes_cases.h).
+// Incremental: a MeshExtractor re-meshes only the blocks changed
 // since its last update (and their -1 neighbours, whose border cubes read
 // them), keeping one mesh chunk per block.
 #pragma once
@@ -20,9 +23,31 @@ namespace range_image_mapping::mapping {
 
 struct MeshOptions {
   // A cube is meshed only if all 8 corners have at least this weight.
-  // Unobserved corners (weight 0) never produce triangles, so the mesh ends
-  // where observations end instead of closing on invented surfaces.
+  // Unobserved corners (weight 0, or a non-finite SDF) never produce
+  // triangles, so the mesh ends where observations end instead of closing on
+  // invented surfaces.
   float min_weight = 1.0f;
+  // Throws MappingError for a negative or non-finite min_weight.
+  void validate() const;
+};
+
+// A vertex named independently of the chunk that made it: the block holding
+// the lower end of its lattice edge and, within that block, axis + 3 * voxel
+// index. Two chunks that cut the same edge made the same vertex. The few
+// vertices inside a cube (the centre of a tunnel's iso-line loop) are named
+// 3 * block_edge^3 + voxel index of the cube's lower corner.
+struct LatticeEdge {
+  BlockKey block = BlockKey::Zero();
+  int index = 0;
+  bool operator==(const LatticeEdge& other) const {
+    return index == other.index && block == other.block;
+  }
+};
+
+struct LatticeEdgeHash {
+  std::size_t operator()(const LatticeEdge& edge) const {
+    return BlockKeyHash()(edge.block) ^ (std::size_t(edge.index) * 0x9E3779B97F4A7C15ull);
+  }
 };
 
 // The triangles of one block: vertices welded within the chunk (each edge
@@ -33,6 +58,7 @@ struct MeshChunk {
   std::vector<Eigen::Vector3f> normals;    // unit, from the SDF gradient, pointing to free space
   std::vector<float> intensities;          // per vertex when the grid stores intensity
   std::vector<Eigen::Vector3i> triangles;  // indices into vertices
+  std::vector<LatticeEdge> vertex_edges;   // each vertex's name, for welding chunks
 };
 
 struct TriangleMeshData {
@@ -43,17 +69,26 @@ struct TriangleMeshData {
 };
 
 // Meshes one block (cubes whose lower corner is in the block, reading the +1
-// neighbours for the far corners).
+// neighbours for the far corners). Vertex normals are SDF gradients by
+// central differences, one-sided where a neighbour is unobserved or lies
+// below a block's lower face, so a chunk reads only its block and the +1
+// neighbours and every lattice edge gets the same vertex from any chunk.
+// Throws MappingError for invalid options or a block whose arrays do not
+// have block_edge^3 entries.
 MeshChunk meshBlock(const VoxelBlockGrid& grid, const VoxelBlock& block, const MeshOptions& options = {});
 
 // The whole grid as one mesh, vertices welded across block borders too
-// (a closed surface has no boundary edges).
+// (a closed surface has no boundary edges). Blocks are meshed in parallel;
+// the output order is deterministic (blocks sorted by key).
 TriangleMeshData extractMesh(const VoxelBlockGrid& grid, const MeshOptions& options = {});
 
 // Number of edges used by exactly one triangle: 0 for a watertight mesh.
 std::size_t countBoundaryEdges(const std::vector<Eigen::Vector3i>& triangles);
 
-// Binary PLY with normals (and "intensity" when present).
+// Binary PLY with normals (and "intensity" when present). Throws
+// std::invalid_argument for normals or intensities that are not one per
+// vertex, or a triangle index out of range; io::PlyFormatError when the file
+// cannot be written.
 void writeMeshPly(const std::string& path, const TriangleMeshData& mesh);
 
 struct MeshUpdate {
@@ -68,8 +103,14 @@ class MeshExtractor {
   explicit MeshExtractor(MeshOptions options = {});
   // Re-meshes the blocks changed since the last call (and their lower
   // neighbours), in parallel. Blocks removed from the grid lose their chunk.
+  // "Changed" means changed_generation above the grid's generation at the
+  // last call, or new since the last call; a grid whose generation went
+  // backwards (reset or replaced) is re-meshed whole. Blocks rebuilt without
+  // triangles keep no chunk.
   MeshUpdate update(const VoxelBlockGrid& grid);
+  // nullptr when the block has no triangles.
   const MeshChunk* chunk(const BlockKey& key) const;
+  // Sorted by key.
   std::vector<const MeshChunk*> chunks() const;
   std::size_t triangleCount() const;
   // All chunks as one mesh (vertices welded across chunk borders).

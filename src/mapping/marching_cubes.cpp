@@ -1,0 +1,490 @@
+#include "range_image_mapping/mapping/marching_cubes.h"
+
+#include "marching_cubes_cases.h"
+#include "number_text.h"
+#include "range_image_mapping/io/ply.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+#include <tsl/robin_map.h>
+#include <tsl/robin_set.h>
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <sstream>
+
+namespace range_image_mapping::mapping {
+namespace {
+
+bool keyLess(const BlockKey& a, const BlockKey& b) {
+  return std::array<int, 3>{a.x(), a.y(), a.z()} < std::array<int, 3>{b.x(), b.y(), b.z()};
+}
+
+std::string keyText(const BlockKey& key) {
+  std::ostringstream text;
+  text << '(' << key.x() << ", " << key.y() << ", " << key.z() << ')';
+  return text.str();
+}
+
+// A block whose arrays do not match the grid would be read out of bounds.
+void checkBlockArrays(const VoxelBlock& block, std::size_t voxels, bool intensity) {
+  const auto check = [&](const std::vector<float>& values, const char* name) {
+    if (values.size() != voxels)
+      throw MappingError("marching cubes: block " + keyText(block.key) + " has " +
+                         std::to_string(values.size()) + " " + name + " values, expected " +
+                         std::to_string(voxels));
+  };
+  check(block.sdf, "sdf");
+  check(block.weight, "weight");
+  if (intensity) check(block.intensity, "intensity");
+}
+
+// Meshes one block at a time; one per thread, so its buffers are reused.
+//
+// The block's voxels and the first three voxel layers of its +1 neighbours
+// are copied into one dense padded array: the cubes on the far faces need
+// one layer, the one-sided gradient at the far face two more.
+class BlockMesher {
+ public:
+  MeshChunk mesh(const VoxelBlockGrid& grid, const VoxelBlock& block, const MeshOptions& options) {
+    MeshChunk chunk;
+    chunk.key = block.key;
+    if (!load(grid, block, options)) return chunk;
+    const MarchingCubesCases& cases = MarchingCubesCases::instance();
+    std::array<int, 8> corner_offset;
+    for (int c = 0; c < 8; ++c)
+      corner_offset[c] = (c & 1) * stride_[0] + ((c >> 1) & 1) * stride_[1] + (c >> 2) * stride_[2];
+    const int edge = edge_;
+    for (int z = 0; z < edge; ++z)
+      for (int y = 0; y < edge; ++y)
+        for (int x = 0; x < edge; ++x) {
+          const int base = paddedIndex(x, y, z);
+          int corner_signs = 0;
+          bool all_observed = true;
+          std::array<float, 8> value;
+          for (int c = 0; c < 8; ++c) {
+            all_observed = all_observed && observed_[base + corner_offset[c]];
+            value[c] = sdf_[base + corner_offset[c]];
+            corner_signs |= int(value[c] < 0.0f) << c;
+          }
+          if (!all_observed || corner_signs == 0 || corner_signs == 255) continue;
+          const MarchingCubesCases::Triangles triangles =
+              cases.triangles(corner_signs, faceDecisions(cases, corner_signs, value));
+          const Eigen::Vector3i cube(x, y, z);
+          const auto vertexOnCubeEdge = [&](int cube_edge) {
+            const CubeEdge& edge_of_cube = cases.edges()[cube_edge];
+            const int c = edge_of_cube.lower_corner;
+            return vertexOn(grid, block.key, cube + Eigen::Vector3i(c & 1, (c >> 1) & 1, c >> 2),
+                            edge_of_cube.axis, chunk);
+          };
+          int interior = -1;
+          if (triangles.interior_loop_size > 0) {
+            loop_vertices_.clear();
+            for (int i = 0; i < triangles.interior_loop_size; ++i)
+              loop_vertices_.push_back(vertexOnCubeEdge(triangles.interior_loop[i]));
+            interior = interiorVertex(block.key, cube, chunk);
+          }
+          for (int t = 0; t < triangles.count; ++t) {
+            Eigen::Vector3i triangle;
+            for (int corner = 0; corner < 3; ++corner) {
+              const uint8_t cube_edge = triangles.edges[3 * t + corner];
+              triangle[corner] = cube_edge == MarchingCubesCases::kInteriorVertex
+                                     ? interior
+                                     : vertexOnCubeEdge(cube_edge);
+            }
+            chunk.triangles.push_back(triangle);
+          }
+        }
+    for (int local_edge : vertex_local_edges_) vertex_of_edge_[local_edge] = -1;
+    vertex_local_edges_.clear();
+    return chunk;
+  }
+
+ private:
+  int paddedIndex(int x, int y, int z) const { return x + padded_ * (y + padded_ * z); }
+
+  // Fills the padded arrays; false when the block cannot produce a triangle.
+  bool load(const VoxelBlockGrid& grid, const VoxelBlock& block, const MeshOptions& options) {
+    edge_ = grid.blockEdge();
+    padded_ = edge_ + 3;
+    stride_ = {1, padded_, padded_ * padded_};
+    with_intensity_ = grid.options().store_intensity;
+    const std::size_t padded_voxels = std::size_t(padded_) * padded_ * padded_;
+    sdf_.resize(padded_voxels);
+    observed_.resize(padded_voxels);
+    if (with_intensity_) intensity_.resize(padded_voxels);
+    vertex_of_edge_.resize(3 * std::size_t(edge_ + 1) * (edge_ + 1) * (edge_ + 1), -1);
+
+    const std::size_t voxels = std::size_t(grid.voxelsPerBlock());
+    checkBlockArrays(block, voxels, with_intensity_);
+    if (std::none_of(block.weight.begin(), block.weight.end(),
+                     [&](float weight) { return weight > 0.0f && weight >= options.min_weight; }))
+      return false;
+    bool has_negative = false, has_positive = false;
+    for (int neighbour = 0; neighbour < 8; ++neighbour) {
+      const Eigen::Vector3i offset(neighbour & 1, (neighbour >> 1) & 1, neighbour >> 2);
+      const VoxelBlock* source = neighbour == 0 ? &block : grid.find(block.key + offset);
+      if (source) checkBlockArrays(*source, voxels, with_intensity_);
+      const Eigen::Vector3i begin = offset * edge_;
+      Eigen::Vector3i end;
+      for (int axis = 0; axis < 3; ++axis) end[axis] = offset[axis] == 0 ? edge_ : padded_;
+      for (int z = begin.z(); z < end.z(); ++z)
+        for (int y = begin.y(); y < end.y(); ++y)
+          for (int x = begin.x(); x < end.x(); ++x) {
+            const int target = paddedIndex(x, y, z);
+            if (!source) {
+              observed_[target] = 0;
+              continue;
+            }
+            const int voxel = (x - begin.x()) + edge_ * ((y - begin.y()) + edge_ * (z - begin.z()));
+            const float sdf = source->sdf[voxel], weight = source->weight[voxel];
+            const bool observed =
+                weight > 0.0f && weight >= options.min_weight && std::isfinite(sdf);
+            observed_[target] = observed;
+            sdf_[target] = sdf;
+            if (with_intensity_) intensity_[target] = source->intensity[voxel];
+            has_negative = has_negative || (observed && sdf < 0.0f);
+            has_positive = has_positive || (observed && sdf >= 0.0f);
+          }
+    }
+    return has_negative && has_positive;
+  }
+
+  // Asymptotic decider: on a face with diagonal negative corners, the
+  // bilinear interpolant's saddle is negative (the negative corners connect)
+  // when their product outweighs the positive diagonal's. Both cubes of the
+  // face multiply the same two values, so they decide alike.
+  static int faceDecisions(const MarchingCubesCases& cases, int corner_signs,
+                           const std::array<float, 8>& value) {
+    int decisions = 0;
+    for (int i = 0; i < cases.ambiguousFaceCount(corner_signs); ++i) {
+      const std::array<int, 4>& q = cases.faces()[cases.ambiguousFace(corner_signs, i)];
+      const int first_negative = value[q[0]] < 0.0f ? 0 : 1;
+      const float negative_product = value[q[first_negative]] * value[q[first_negative + 2]];
+      const float positive_product = value[q[1 - first_negative]] * value[q[3 - first_negative]];
+      if (negative_product > positive_product) decisions |= 1 << i;
+    }
+    return decisions;
+  }
+
+  // SDF derivative along one axis at lattice point `point` (padded
+  // coordinates in [0, edge]), in SDF units per voxel. Central where both
+  // neighbours are observed; never reads below a block's lower face, so what
+  // a chunk reads stays within its block and the +1 neighbours and the
+  // value does not depend on which chunk asks.
+  float derivative(const Eigen::Vector3i& point, int axis) const {
+    const int index = paddedIndex(point.x(), point.y(), point.z());
+    const int step = stride_[axis];
+    const bool lower_face = point[axis] % edge_ == 0;
+    const bool minus = !lower_face && observed_[index - step];
+    const bool plus = observed_[index + step];
+    if (minus && plus) return 0.5f * (sdf_[index + step] - sdf_[index - step]);
+    if (plus) {
+      if (observed_[index + 2 * step])  // second order, as accurate as the central difference
+        return 0.5f * (-3.0f * sdf_[index] + 4.0f * sdf_[index + step] - sdf_[index + 2 * step]);
+      return sdf_[index + step] - sdf_[index];
+    }
+    if (minus) return sdf_[index] - sdf_[index - step];
+    return 0.0f;
+  }
+
+  Eigen::Vector3f gradient(const Eigen::Vector3i& point) const {
+    return {derivative(point, 0), derivative(point, 1), derivative(point, 2)};
+  }
+
+  // The chunk's vertex on the lattice edge from `lower` (padded coordinates)
+  // along `axis`, created on first use.
+  int vertexOn(const VoxelBlockGrid& grid, const BlockKey& key, const Eigen::Vector3i& lower,
+               int axis, MeshChunk& chunk) {
+    const int local_edge = axis + 3 * (lower.x() + (edge_ + 1) * (lower.y() + (edge_ + 1) * lower.z()));
+    int& vertex = vertex_of_edge_[local_edge];
+    if (vertex >= 0) return vertex;
+    vertex = int(chunk.vertices.size());
+    vertex_local_edges_.push_back(local_edge);
+
+    const Eigen::Vector3i upper = lower + Eigen::Vector3i::Unit(axis);
+    const int lower_index = paddedIndex(lower.x(), lower.y(), lower.z());
+    const int upper_index = lower_index + stride_[axis];
+    const float lower_sdf = sdf_[lower_index], upper_sdf = sdf_[upper_index];
+    // The signs differ, so the denominator is not zero.
+    const float t = std::clamp(lower_sdf / (lower_sdf - upper_sdf), 0.0f, 1.0f);
+
+    // From global lattice coordinates, so every chunk computes the same bits.
+    const Eigen::Matrix<int64_t, 3, 1> lattice =
+        key.cast<int64_t>() * int64_t(edge_) + lower.cast<int64_t>();
+    Eigen::Vector3d position = lattice.cast<double>();
+    position[axis] += double(t);
+    chunk.vertices.push_back((position * grid.voxelSize()).cast<float>());
+
+    Eigen::Vector3f normal = (1.0f - t) * gradient(lower) + t * gradient(upper);
+    const float length = normal.norm();
+    if (length > 0.0f && std::isfinite(length))
+      normal /= length;
+    else  // a flat or unobserved neighbourhood: the edge itself points to free space
+      normal = Eigen::Vector3f::Unit(axis) * (upper_sdf > lower_sdf ? 1.0f : -1.0f);
+    chunk.normals.push_back(normal);
+
+    if (with_intensity_)
+      chunk.intensities.push_back((1.0f - t) * intensity_[lower_index] + t * intensity_[upper_index]);
+
+    // Name the edge by the block holding its lower end (a far-face edge
+    // belongs to the +1 neighbour).
+    LatticeEdge name;
+    Eigen::Vector3i voxel = lower;
+    for (int a = 0; a < 3; ++a)
+      if (voxel[a] == edge_) {
+        voxel[a] = 0;
+        name.block[a] = key[a] + 1;
+      } else {
+        name.block[a] = key[a];
+      }
+    name.index = axis + 3 * (voxel.x() + edge_ * (voxel.y() + edge_ * voxel.z()));
+    chunk.vertex_edges.push_back(name);
+    return vertex;
+  }
+
+  // The extra vertex of a cube whose iso-line loop (loop_vertices_) is
+  // fanned around its mean; named after the cube, so it is never welded.
+  int interiorVertex(const BlockKey& key, const Eigen::Vector3i& cube, MeshChunk& chunk) {
+    Eigen::Vector3f position = Eigen::Vector3f::Zero(), normal = Eigen::Vector3f::Zero();
+    float intensity = 0.0f;
+    for (int vertex : loop_vertices_) {
+      position += chunk.vertices[vertex];
+      normal += chunk.normals[vertex];
+      if (with_intensity_) intensity += chunk.intensities[vertex];
+    }
+    const float count = float(loop_vertices_.size());
+    chunk.vertices.push_back(position / count);
+    const float length = normal.norm();
+    chunk.normals.push_back(length > 0.0f ? Eigen::Vector3f(normal / length)
+                                          : chunk.normals[loop_vertices_.front()]);
+    if (with_intensity_) chunk.intensities.push_back(intensity / count);
+    LatticeEdge name;
+    name.block = key;
+    name.index = 3 * edge_ * edge_ * edge_ + cube.x() + edge_ * (cube.y() + edge_ * cube.z());
+    chunk.vertex_edges.push_back(name);
+    return int(chunk.vertices.size()) - 1;
+  }
+
+  int edge_ = 0, padded_ = 0;
+  std::array<int, 3> stride_{};
+  bool with_intensity_ = false;
+  std::vector<float> sdf_, intensity_;
+  std::vector<uint8_t> observed_;
+  std::vector<int> vertex_of_edge_;      // local lattice edge -> vertex of the current chunk
+  std::vector<int> vertex_local_edges_;  // what to reset after the chunk
+  std::vector<int> loop_vertices_;
+};
+
+// One mesh from chunks in the given order; the first chunk that cut a
+// lattice edge provides its vertex.
+TriangleMeshData weldChunks(const std::vector<const MeshChunk*>& chunks) {
+  TriangleMeshData mesh;
+  std::size_t vertex_count = 0, triangle_count = 0;
+  bool with_intensity = false, all_with_intensity = true;
+  for (const MeshChunk* chunk : chunks) {
+    vertex_count += chunk->vertices.size();
+    triangle_count += chunk->triangles.size();
+    if (chunk->vertices.empty()) continue;
+    const bool has = chunk->intensities.size() == chunk->vertices.size();
+    with_intensity = with_intensity || has;
+    all_with_intensity = all_with_intensity && has;
+  }
+  with_intensity = with_intensity && all_with_intensity;
+  mesh.vertices.reserve(vertex_count);
+  mesh.normals.reserve(vertex_count);
+  if (with_intensity) mesh.intensities.reserve(vertex_count);
+  mesh.triangles.reserve(triangle_count);
+
+  tsl::robin_map<LatticeEdge, int, LatticeEdgeHash> vertex_of_edge;
+  vertex_of_edge.reserve(vertex_count);
+  std::vector<int> remap;
+  for (const MeshChunk* chunk : chunks) {
+    if (chunk->vertex_edges.size() != chunk->vertices.size() ||
+        chunk->normals.size() != chunk->vertices.size())
+      throw MappingError("marching cubes: chunk " + keyText(chunk->key) +
+                         " has vertices, normals and lattice edges of different counts");
+    remap.resize(chunk->vertices.size());
+    for (std::size_t v = 0; v < chunk->vertices.size(); ++v) {
+      const auto [found, inserted] =
+          vertex_of_edge.try_emplace(chunk->vertex_edges[v], int(mesh.vertices.size()));
+      remap[v] = found->second;
+      if (!inserted) continue;
+      mesh.vertices.push_back(chunk->vertices[v]);
+      mesh.normals.push_back(chunk->normals[v]);
+      if (with_intensity) mesh.intensities.push_back(chunk->intensities[v]);
+    }
+    for (const Eigen::Vector3i& triangle : chunk->triangles)
+      mesh.triangles.emplace_back(remap[triangle[0]], remap[triangle[1]], remap[triangle[2]]);
+  }
+  return mesh;
+}
+
+double secondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+}  // namespace
+
+void MeshOptions::validate() const {
+  if (!std::isfinite(min_weight) || min_weight < 0.0f)
+    throw MappingError("MeshOptions: min_weight must be finite and >= 0, got " +
+                       numberText(min_weight));
+}
+
+MeshChunk meshBlock(const VoxelBlockGrid& grid, const VoxelBlock& block, const MeshOptions& options) {
+  options.validate();
+  BlockMesher mesher;
+  return mesher.mesh(grid, block, options);
+}
+
+TriangleMeshData extractMesh(const VoxelBlockGrid& grid, const MeshOptions& options) {
+  options.validate();
+  std::vector<const VoxelBlock*> blocks = grid.blocks();
+  std::sort(blocks.begin(), blocks.end(),
+            [](const VoxelBlock* a, const VoxelBlock* b) { return keyLess(a->key, b->key); });
+  std::vector<MeshChunk> chunks(blocks.size());
+  tbb::enumerable_thread_specific<BlockMesher> meshers;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 4),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      BlockMesher& mesher = meshers.local();
+                      for (std::size_t i = range.begin(); i != range.end(); ++i)
+                        chunks[i] = mesher.mesh(grid, *blocks[i], options);
+                    });
+  std::vector<const MeshChunk*> pointers;
+  pointers.reserve(chunks.size());
+  for (const MeshChunk& chunk : chunks) pointers.push_back(&chunk);
+  return weldChunks(pointers);
+}
+
+std::size_t countBoundaryEdges(const std::vector<Eigen::Vector3i>& triangles) {
+  // Undirected edges as sorted index pairs; a run of length one is a boundary edge.
+  std::vector<uint64_t> edges;
+  edges.reserve(3 * triangles.size());
+  for (const Eigen::Vector3i& triangle : triangles)
+    for (int corner = 0; corner < 3; ++corner) {
+      const auto a = uint32_t(triangle[corner]), b = uint32_t(triangle[(corner + 1) % 3]);
+      edges.push_back(uint64_t(std::min(a, b)) << 32 | std::max(a, b));
+    }
+  std::sort(edges.begin(), edges.end());
+  std::size_t boundary = 0;
+  for (std::size_t i = 0; i < edges.size();) {
+    std::size_t end = i + 1;
+    while (end < edges.size() && edges[end] == edges[i]) ++end;
+    boundary += end - i == 1;
+    i = end;
+  }
+  return boundary;
+}
+
+void writeMeshPly(const std::string& path, const TriangleMeshData& mesh) {
+  if (!mesh.intensities.empty() && mesh.intensities.size() != mesh.vertices.size())
+    throw MappingError("writeMeshPly: " + std::to_string(mesh.intensities.size()) +
+                       " intensities for " + std::to_string(mesh.vertices.size()) + " vertices");
+  std::vector<io::PlyProperty> properties;
+  if (!mesh.intensities.empty()) properties.push_back({"intensity", mesh.intensities});
+  io::writePlyMesh(path, mesh.vertices, mesh.normals, mesh.triangles, properties);
+}
+
+// ---------------------------------------------------------------- MeshExtractor
+
+struct MeshExtractor::State {
+  tsl::robin_map<BlockKey, MeshChunk, BlockKeyHash> chunks;  // only blocks with triangles
+  // Every block of the grid at the last update: a block that is gone
+  // changes the border cubes of its lower neighbours even if it had no chunk.
+  tsl::robin_set<BlockKey, BlockKeyHash> known_blocks;
+  tbb::enumerable_thread_specific<BlockMesher> meshers;
+};
+
+MeshExtractor::MeshExtractor(MeshOptions options)
+    : options_(options), state_(std::make_shared<State>()) {
+  options_.validate();
+}
+
+MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid) {
+  const auto start = std::chrono::steady_clock::now();
+  MeshUpdate result;
+  State& state = *state_;
+  const bool remesh_all = grid.generation() < meshed_generation_;
+
+  // Blocks whose cubes read a changed block: itself and the 7 lower neighbours.
+  tsl::robin_set<BlockKey, BlockKeyHash> dirty;
+  const auto markWithLowerNeighbours = [&](const BlockKey& key) {
+    for (int neighbour = 0; neighbour < 8; ++neighbour) {
+      const BlockKey lower = key - Eigen::Vector3i(neighbour & 1, (neighbour >> 1) & 1, neighbour >> 2);
+      if (grid.find(lower)) dirty.insert(lower);
+    }
+  };
+  std::vector<BlockKey> gone;
+  for (const BlockKey& key : state.known_blocks)
+    if (!grid.find(key)) {
+      gone.push_back(key);
+      markWithLowerNeighbours(key);
+    }
+  const std::vector<const VoxelBlock*> blocks = grid.blocks();
+  for (const VoxelBlock* block : blocks)
+    if (remesh_all || block->changed_generation > meshed_generation_ ||
+        !state.known_blocks.count(block->key))
+      markWithLowerNeighbours(block->key);
+  result.changed.assign(dirty.begin(), dirty.end());
+  std::sort(result.changed.begin(), result.changed.end(), keyLess);
+
+  // Meshing may throw (a malformed block): nothing is changed before it is done.
+  std::vector<MeshChunk> rebuilt(result.changed.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rebuilt.size(), 4),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      BlockMesher& mesher = state.meshers.local();
+                      for (std::size_t i = range.begin(); i != range.end(); ++i)
+                        rebuilt[i] = mesher.mesh(grid, *grid.find(result.changed[i]), options_);
+                    });
+
+  for (const BlockKey& key : gone)
+    if (state.chunks.erase(key)) result.removed.push_back(key);
+  std::sort(result.removed.begin(), result.removed.end(), keyLess);
+  for (MeshChunk& chunk : rebuilt) {
+    if (chunk.triangles.empty())
+      state.chunks.erase(chunk.key);
+    else
+      state.chunks[chunk.key] = std::move(chunk);
+  }
+  state.known_blocks.clear();
+  for (const VoxelBlock* block : blocks) state.known_blocks.insert(block->key);
+  meshed_generation_ = grid.generation();
+  result.seconds = secondsSince(start);
+  return result;
+}
+
+const MeshChunk* MeshExtractor::chunk(const BlockKey& key) const {
+  const auto found = state_->chunks.find(key);
+  return found == state_->chunks.end() ? nullptr : &found->second;
+}
+
+std::vector<const MeshChunk*> MeshExtractor::chunks() const {
+  std::vector<const MeshChunk*> sorted;
+  sorted.reserve(state_->chunks.size());
+  for (const auto& [key, chunk] : state_->chunks) sorted.push_back(&chunk);
+  std::sort(sorted.begin(), sorted.end(),
+            [](const MeshChunk* a, const MeshChunk* b) { return keyLess(a->key, b->key); });
+  return sorted;
+}
+
+std::size_t MeshExtractor::triangleCount() const {
+  std::size_t count = 0;
+  for (const auto& [key, chunk] : state_->chunks) count += chunk.triangles.size();
+  return count;
+}
+
+TriangleMeshData MeshExtractor::combined() const { return weldChunks(chunks()); }
+
+void MeshExtractor::clear() {
+  state_->chunks.clear();
+  state_->known_blocks.clear();
+  meshed_generation_ = 0;
+}
+
+}  // namespace range_image_mapping::mapping
