@@ -7,6 +7,7 @@ namespace range_image_mapping::tool {
 
 void addDecodeCommand(CLI::App& app);
 void addEvalCommand(CLI::App& app);
+void addMapCommand(CLI::App& app);
 void addOdometryCommand(CLI::App& app);
 void addSimulateCommand(CLI::App& app);
 
