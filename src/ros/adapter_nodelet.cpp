@@ -16,6 +16,7 @@
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
+#include <sensor_msgs/Image.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <std_msgs/String.h>
 #include <tf2_ros/static_transform_broadcaster.h>
@@ -25,6 +26,8 @@
 
 #include <Eigen/Geometry>
 
+#include <algorithm>
+#include <cmath>
 #include <deque>
 #include <memory>
 #include <optional>
@@ -65,6 +68,25 @@ void accumulate(ProjectionStatistics& total, const ProjectionStatistics& part) {
   total.kept += part.kept;
 }
 
+// The image destaggered (as the scene looks) for rviz's Image display: mono16
+// millimetres, 0 = no return as the sensor sends it; ranges past 65.535 m
+// saturate. rviz scales it with the display's min and max.
+void toDisplayImage(const RangeImage& image, const std_msgs::Header& header, sensor_msgs::Image& display) {
+  const RangeImage destaggered = image.destaggered();
+  display.header = header;
+  display.height = static_cast<uint32_t>(destaggered.rows());
+  display.width = static_cast<uint32_t>(destaggered.columns());
+  display.encoding = "mono16";
+  display.is_bigendian = 0;
+  display.step = display.width * sizeof(uint16_t);
+  display.data.resize(std::size_t(display.step) * display.height);
+  uint16_t* pixels = reinterpret_cast<uint16_t*>(display.data.data());
+  for (std::size_t i = 0; i < destaggered.range.size(); ++i) {
+    const float range = destaggered.range[i];
+    pixels[i] = isValidRange(range) ? static_cast<uint16_t>(std::min(std::lround(range * 1000.0f), 65535l)) : 0;
+  }
+}
+
 }  // namespace
 
 class AdapterNodelet : public nodelet::Nodelet {
@@ -96,6 +118,7 @@ class AdapterNodelet : public nodelet::Nodelet {
   AdapterParameters parameters_;
   ros::Publisher range_image_publisher_;
   ros::Publisher cloud_publisher_;
+  ros::Publisher display_publisher_;  // range_image_display, for rviz
   std::unique_ptr<tf2_ros::StaticTransformBroadcaster> static_transform_broadcaster_;
   ros::Subscriber input_subscriber_;
   ros::Subscriber metadata_subscriber_;
@@ -158,6 +181,7 @@ void AdapterNodelet::onInit() {
   }
   range_image_publisher_ = node.advertise<LidarRangeImage>("range_image", 4);
   if (parameters_.publish_cloud) cloud_publisher_ = node.advertise<sensor_msgs::PointCloud2>("cloud", 4);
+  display_publisher_ = node.advertise<sensor_msgs::Image>("range_image_display", 2);
   if (parameters_.publish_static_tf)
     static_transform_broadcaster_ = std::make_unique<tf2_ros::StaticTransformBroadcaster>();
   statistics_timer_ = node.createSteadyTimer(ros::WallDuration(parameters_.statistics_period_s),
@@ -335,7 +359,7 @@ void AdapterNodelet::feedPacket(const uint8_t* data, std::size_t size, const ros
 void AdapterNodelet::onScan(const LidarScan& scan) {
   revolution_in_progress_ = false;
   try {
-    if (range_image_publisher_.getNumSubscribers() == 0 &&
+    if (range_image_publisher_.getNumSubscribers() == 0 && display_publisher_.getNumSubscribers() == 0 &&
         (!cloud_publisher_ || cloud_publisher_.getNumSubscribers() == 0))
       return;
     const RangeImage image = toRangeImage(scan, model_, parameters_.ouster_return);
@@ -455,6 +479,11 @@ void AdapterNodelet::publish(const RangeImage& image, const std_msgs::Header& he
     const auto cloud = boost::make_shared<sensor_msgs::PointCloud2>();
     toPointCloud2(image, header, *cloud);
     cloud_publisher_.publish(boost::shared_ptr<const sensor_msgs::PointCloud2>(cloud));
+  }
+  if (display_publisher_.getNumSubscribers() > 0) {
+    const auto display = boost::make_shared<sensor_msgs::Image>();
+    toDisplayImage(image, header, *display);
+    display_publisher_.publish(boost::shared_ptr<const sensor_msgs::Image>(display));
   }
 }
 

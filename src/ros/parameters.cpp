@@ -3,6 +3,7 @@
 #include <XmlRpcValue.h>
 
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 namespace range_image_mapping {
@@ -262,6 +263,80 @@ OdometryParameters readOdometryParameters(const ros::NodeHandle& private_node) {
       reader.getDouble("keyframe_angle_deg", odometry_defaults.keyframe_angle_rad * 180.0 / M_PI, 0.0, 180.0) *
       M_PI / 180.0;
   odometry.max_time_gap_s = reader.getDouble("max_time_gap", odometry_defaults.max_time_gap_s, 1e-3, 3600.0);
+  return parameters;
+}
+
+MapperParameters readMapperParameters(const ros::NodeHandle& private_node) {
+  const ParameterReader reader(private_node);
+  MapperParameters parameters;
+  const MapperParameters defaults;
+  // The core's own ranges (TsdfMapOptions::validate) are the one source of
+  // what it accepts: its values are read with no limits but their type here.
+  constexpr double kAny = std::numeric_limits<double>::max();
+  constexpr int kAnyInt = std::numeric_limits<int>::max();
+
+  mapping::TsdfMapOptions& map = parameters.map;
+  map.grid.voxel_size_m = reader.getDouble("voxel_size", defaults.map.grid.voxel_size_m, -kAny, kAny);
+  map.grid.block_edge = reader.getInt("block_edge", defaults.map.grid.block_edge, -kAnyInt, kAnyInt);
+  map.grid.max_blocks = static_cast<std::size_t>(
+      reader.getInt("max_blocks", static_cast<int>(defaults.map.grid.max_blocks), 0, kAnyInt));
+  map.integrator.truncation_m = reader.getDouble("truncation", defaults.map.integrator.truncation_m, -kAny, kAny);
+  map.integrator.min_range_m = reader.getDouble("min_range", defaults.map.integrator.min_range_m, -kAny, kAny);
+  map.integrator.max_range_m = reader.getDouble("max_range", defaults.map.integrator.max_range_m, -kAny, kAny);
+  map.integrator.point_stride =
+      reader.getInt("integration_stride", defaults.map.integrator.point_stride, -kAnyInt, kAnyInt);
+  map.integrator.max_weight =
+      static_cast<float>(reader.getDouble("max_weight", defaults.map.integrator.max_weight, -kAny, kAny));
+  map.integrator.range_weighting = reader.getBool("range_weighting", defaults.map.integrator.range_weighting);
+  map.integrator.range_weighting_start_m =
+      reader.getDouble("range_weighting_start", defaults.map.integrator.range_weighting_start_m, -kAny, kAny);
+  map.integrator.incidence_weighting =
+      reader.getBool("incidence_weighting", defaults.map.integrator.incidence_weighting);
+  map.mesh.min_weight =
+      static_cast<float>(reader.getDouble("mesh_min_weight", defaults.map.mesh.min_weight, -kAny, kAny));
+  map.memory_radius_m = reader.getDouble("memory_radius", defaults.map.memory_radius_m, -kAny, kAny);
+  map.max_pose_jump_m = reader.getDouble("max_pose_jump", defaults.map.max_pose_jump_m, -kAny, kAny);
+  map.max_refused_jumps = reader.getInt("max_refused_jumps", defaults.map.max_refused_jumps, -kAnyInt, kAnyInt);
+
+  parameters.color_mode = reader.getChoice("color_mode", "height", {"height", "intensity"}) == "intensity"
+                              ? MeshColorMode::kIntensity
+                              : MeshColorMode::kHeight;
+  map.grid.store_intensity = parameters.color_mode == MeshColorMode::kIntensity;
+  try {
+    map.validate();
+  } catch (const mapping::MappingError& error) {
+    throw ParameterError("mapper parameters in " + private_node.getNamespace() + " rejected by the map: " +
+                         error.what());
+  }
+
+  parameters.world_frame = reader.getFrame("world_frame", defaults.world_frame);
+  parameters.pose_source =
+      reader.getChoice("pose_source", "tf", {"tf", "odometry"}) == "odometry" ? PoseSource::kOdometry
+                                                                              : PoseSource::kTf;
+  parameters.deskew = reader.getBool("deskew", defaults.deskew);
+  parameters.max_time_gap_s = reader.getDouble("max_time_gap", defaults.max_time_gap_s, 1e-3, 3600.0);
+  parameters.tf_timeout_s = reader.getDouble("tf_timeout", defaults.tf_timeout_s, 0.0, 60.0);
+  parameters.lidar_transform_timeout_s =
+      reader.getDouble("lidar_transform_timeout", defaults.lidar_transform_timeout_s, 0.0, 600.0);
+  parameters.queue_size = reader.getInt("queue_size", defaults.queue_size, 1, 1000);
+
+  parameters.mesh_rate_hz = reader.getDouble("mesh_rate", defaults.mesh_rate_hz, 0.01, 100.0);
+  parameters.height_color_min_m = reader.getDouble("height_color_min", defaults.height_color_min_m, -1e4, 1e4);
+  parameters.height_color_max_m = reader.getDouble("height_color_max", defaults.height_color_max_m, -1e4, 1e4);
+  if (!(parameters.height_color_max_m > parameters.height_color_min_m))
+    throw ParameterError("parameter " + private_node.resolveName("height_color_max") + " (" +
+                         toText(parameters.height_color_max_m) + ") must be above " +
+                         private_node.resolveName("height_color_min") + " (" +
+                         toText(parameters.height_color_min_m) + ")");
+  parameters.intensity_color_max =
+      reader.getDouble("intensity_color_max", defaults.intensity_color_max, 1e-6, 1e9);
+  parameters.marker_chunk_blocks = reader.getInt("marker_chunk_blocks", defaults.marker_chunk_blocks, 1, 64);
+  parameters.display_max_height_m = reader.getDouble("display_max_height", defaults.display_max_height_m, -1e4,
+                                                     std::numeric_limits<double>::infinity());
+  parameters.triangle_warning = static_cast<std::size_t>(
+      reader.getInt("triangle_warning", static_cast<int>(defaults.triangle_warning), 0, kAnyInt));
+  parameters.statistics_period_s =
+      reader.getDouble("statistics_period", defaults.statistics_period_s, 0.1, 3600.0);
   return parameters;
 }
 

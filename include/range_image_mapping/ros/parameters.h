@@ -3,11 +3,13 @@
 // an error naming the parameter, never silently replaced by the default.
 #pragma once
 
+#include "range_image_mapping/mapping/tsdf_map.h"
 #include "range_image_mapping/ouster_packet.h"
 #include "range_image_mapping/registration/lidar_odometry.h"
 
 #include <ros/node_handle.h>
 
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -102,5 +104,47 @@ struct OdometryParameters {
 // Reads every Odometry parameter from the nodelet's private node handle.
 // Throws ParameterError naming the first bad parameter.
 OdometryParameters readOdometryParameters(const ros::NodeHandle& private_node);
+
+// ------------------------------------------------------------ Mapper nodelet
+
+// Where the pose of each range image comes from.
+enum class PoseSource {
+  kTf,        // world_frame -> image frame on tf at the image's stamp
+  kOdometry,  // the odometry topic at the same stamp, composed with base -> lidar from tf
+};
+enum class MeshColorMode { kHeight, kIntensity };
+
+struct MapperParameters {
+  // The core's options: voxel_size, block_edge, max_blocks, truncation,
+  // min_range, max_range, integration_stride, max_weight, memory_radius,
+  // max_pose_jump (and intensity storage when color_mode is intensity).
+  mapping::TsdfMapOptions map;
+  std::string world_frame = "odom";
+  PoseSource pose_source = PoseSource::kTf;
+  // Motion compensation with the twist between consecutive poses.
+  bool deskew = true;
+  double max_time_gap_s = 0.5;  // poses farther apart give no twist (a gap, a restart)
+  double tf_timeout_s = 0.5;    // wall time a scan waits for its tf before it is dropped
+  double lidar_transform_timeout_s = 2.0;  // odometry source: wall time to wait for base -> lidar
+  int queue_size = 8;                      // range images (and odometry) waiting
+  // Mesh output.
+  double mesh_rate_hz = 1.0;
+  MeshColorMode color_mode = MeshColorMode::kHeight;
+  double height_color_min_m = -1.0;  // colour scale of color_mode height, world z
+  double height_color_max_m = 3.0;
+  double intensity_color_max = 255.0;  // intensity of the brightest colour (color_mode intensity)
+  int marker_chunk_blocks = 4;  // one marker per cube of this many blocks per edge
+  // Display only (markers and surface_points): triangles with a corner above
+  // this world z are left out, so rviz shows rooms without their ceilings.
+  // The map and saved meshes keep everything.
+  double display_max_height_m = std::numeric_limits<double>::infinity();
+  std::size_t triangle_warning = 3'000'000;  // warn once the mesh passes this many triangles
+  double statistics_period_s = 10.0;         // period of the log summary
+};
+
+// Reads every Mapper parameter from the nodelet's private node handle and
+// validates the core's options (TsdfMapOptions::validate). Throws
+// ParameterError naming the first bad parameter.
+MapperParameters readMapperParameters(const ros::NodeHandle& private_node);
 
 }  // namespace range_image_mapping
