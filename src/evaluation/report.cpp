@@ -431,6 +431,47 @@ void plotPairwiseErrors(const TrajectoryEvaluation& evaluation, const std::strin
   runGnuplot(directory, script.str(), png_path);
 }
 
+void plotRunReport(const RunPlotData& data, const std::string& png_path) {
+  if (data.estimate.empty()) throw PlotError("no poses to plot for " + png_path);
+  const bool truth = data.ground_truth.size() == data.estimate.size();
+  const bool errors = data.position_errors_m.size() == data.estimate.size();
+  const std::array<int, 2> axes = topViewAxes(truth ? data.ground_truth : data.estimate);
+  static constexpr std::array<const char*, 3> kAxisNames{"x", "y", "z"};
+  TemporaryDirectory directory;
+  const std::string poses_path = directory.file("poses.dat"), timing_path = directory.file("timing.dat");
+  {
+    std::ofstream poses(poses_path), timing(timing_path);
+    poses << "# scan, estimate " << kAxisNames[axes[0]] << ' ' << kAxisNames[axes[1]]
+          << ", ground truth the same, position error m\n";
+    for (std::size_t i = 0; i < data.estimate.size(); ++i) {
+      const Eigen::Vector3d& estimate = data.estimate[i].translation();
+      const Eigen::Vector3d truth_position = truth ? data.ground_truth[i].translation() : estimate;
+      poses << i << ' ' << estimate[axes[0]] << ' ' << estimate[axes[1]] << ' ' << truth_position[axes[0]] << ' '
+            << truth_position[axes[1]] << ' ' << (errors ? data.position_errors_m[i] : 0.0) << '\n';
+    }
+    timing << "# scan, odometry ms, integration ms\n";
+    for (std::size_t i = 0; i < std::min(data.odometry_ms.size(), data.integrate_ms.size()); ++i)
+      timing << i << ' ' << data.odometry_ms[i] << ' ' << data.integrate_ms[i] << '\n';
+  }
+  std::ostringstream script;
+  script << scriptHeader(png_path, 1500, 600) << "set multiplot layout 1," << (errors ? 3 : 2) << "\n"
+         << "set title 'Trajectory (top view)'\nset xlabel '" << kAxisNames[axes[0]] << " [m]'\nset ylabel '"
+         << kAxisNames[axes[1]] << " [m]'\nset size ratio -1\nset key below\n"
+         << "plot " << (truth ? quoted(poses_path) + " using 4:5 with lines lw 3 lc rgb '#999999' title "
+                                "'ground truth', \\\n     "
+                              : std::string())
+         << quoted(poses_path) << " using 2:3 with lines lw 2 lc rgb '#1f77b4' title 'estimate"
+         << (truth ? " (aligned)" : "") << "'\n"
+         << "set size noratio\nset title 'Time per scan'\nset xlabel 'scan'\nset ylabel 'ms'\n"
+         << "plot " << quoted(timing_path) << " using 1:2 with lines lc rgb '#1f77b4' title 'odometry', \\\n     "
+         << quoted(timing_path) << " using 1:3 with lines lc rgb '#d62728' title 'TSDF integration'\n";
+  if (errors)
+    script << "set title 'Position error (ATE)'\nset ylabel 'm'\n"
+           << "plot " << quoted(poses_path) << " using 1:6 with lines lc rgb '#2ca02c' title 'error'\n";
+  script << "unset multiplot\n";
+  runGnuplot(directory, script.str(), png_path);
+}
+
 void writeDistanceColouredCloud(const std::string& path, const std::vector<Eigen::Vector3f>& points,
                                 const std::vector<float>& distances, double threshold_m) {
   if (points.size() != distances.size())

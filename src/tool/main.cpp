@@ -12,6 +12,7 @@ int main(int argc, char** argv) {
   range_image_mapping::tool::addEvalCommand(app);
   range_image_mapping::tool::addOdometryCommand(app);
   range_image_mapping::tool::addMapCommand(app);
+  range_image_mapping::tool::addRunCommand(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::RuntimeError& error) {  // a command that ran and failed

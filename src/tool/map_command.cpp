@@ -2,6 +2,7 @@
 // poses or rim odometry's estimate), written as a triangle mesh with a report
 // of timing, memory and, against a ground-truth surface, accuracy.
 #include "commands.h"
+#include "outputs.h"
 #include "progress.h"
 
 #include "range_image_mapping/evaluation/report.h"
@@ -118,12 +119,6 @@ struct StageTimes {
   std::vector<double> integrate_per_scan;
 };
 
-double median(std::vector<double> values) {
-  if (values.empty()) return 0.0;
-  std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
-  return values[values.size() / 2];
-}
-
 Json::Value timingJson(const StageTimes& times, std::size_t scans) {
   Json::Value timing;
   timing["read_seconds"] = times.read;
@@ -139,37 +134,6 @@ Json::Value timingJson(const StageTimes& times, std::size_t scans) {
           : 1e3 * *std::max_element(times.integrate_per_scan.begin(), times.integrate_per_scan.end());
   timing["read_ms_per_scan_mean"] = scans ? 1e3 * times.read / double(scans) : 0.0;
   return timing;
-}
-
-Json::Value optionsJson(const MapCommandOptions& options) {
-  const mapping::TsdfMapOptions& map = options.map;
-  Json::Value json;
-  json["voxel_m"] = map.grid.voxel_size_m;
-  json["block_edge"] = map.grid.block_edge;
-  json["truncation_m"] = map.integrator.truncationFor(map.grid);
-  json["min_range_m"] = map.integrator.min_range_m;
-  json["max_range_m"] = map.integrator.max_range_m;
-  json["point_stride"] = map.integrator.point_stride;
-  json["max_weight"] = map.integrator.max_weight;
-  json["memory_radius_m"] = map.memory_radius_m;
-  json["intensity"] = map.grid.store_intensity;
-  json["deskew"] = !options.no_deskew;
-  return json;
-}
-
-// Writes next to the destination and renames, so a failed run never leaves
-// a truncated mesh under the name asked for.
-void writeMeshAtomically(const std::string& path, const mapping::TriangleMeshData& mesh) {
-  const fs::path destination(path);
-  if (!destination.parent_path().empty()) fs::create_directories(destination.parent_path());
-  const fs::path partial = destination.parent_path() / (destination.stem().string() + ".partial.ply");
-  try {
-    mapping::writeMeshPly(partial.string(), mesh);
-  } catch (...) {
-    fs::remove(partial);
-    throw;
-  }
-  fs::rename(partial, destination);
 }
 
 int runMap(const MapCommandOptions& options) {
@@ -273,7 +237,7 @@ int runMap(const MapCommandOptions& options) {
   report["poses"] = poses_path;
   report["poses_frame"] = poses_frame;
   report["mesh"] = options.output;
-  report["options"] = optionsJson(options);
+  report["options"] = mapOptionsJson(options.map, !options.no_deskew);
   report["scans"] = Json::UInt64(scans);
   report["scans_integrated"] = Json::UInt64(integrated);
   report["scans_refused"] = Json::UInt64(refused);
@@ -288,35 +252,14 @@ int runMap(const MapCommandOptions& options) {
   std::string evaluation_line;
   if (!options.eval.empty()) {
     const auto evaluate_started = Clock::now();
-    const double threshold = 3.0 * options.map.grid.voxel_size_m;
-    evaluation::SurfaceSamplingOptions sampling;
-    sampling.spacing_m = threshold / 4.0;  // as rim eval mesh
-    const evaluation::SurfaceSample estimate = evaluation::loadSurfaceSample(options.output, sampling);
-    const evaluation::SurfaceSample truth = evaluation::loadSurfaceSample(options.eval, sampling);
-    const evaluation::SurfaceMetrics metrics = evaluation::compareSurfaces(estimate.points, truth.points, threshold);
-    evaluation::SurfaceReportContext context;
-    context.estimate = evaluation::describeSurface(options.output, estimate);
-    context.ground_truth = evaluation::describeSurface(options.eval, truth);
-    context.voxel_m = options.map.grid.voxel_size_m;
-    context.sample_spacing_m = sampling.spacing_m;
-    Json::Value parsed;
-    std::istringstream text(evaluation::surfaceReportJson(metrics, context));
-    std::string errors;
-    Json::parseFromStream(Json::CharReaderBuilder(), text, &parsed, &errors);
-    report["evaluation"] = parsed;
-    evaluation_line = evaluation::surfaceSummaryLine(metrics);
+    const SurfaceEvaluation evaluation = evaluateMeshFile(options.output, options.eval, options.map.grid.voxel_size_m);
+    report["evaluation"] = evaluation.json;
+    evaluation_line = evaluation.summary_line;
     times.evaluate = secondsSince(evaluate_started);
   }
   report["timing"] = timingJson(times, integrated + refused);
   report["wall_seconds"] = secondsSince(started);
-  if (!options.json.empty()) {
-    const fs::path json_path(options.json);
-    if (!json_path.parent_path().empty()) fs::create_directories(json_path.parent_path());
-    std::ofstream file(options.json);
-    file << Json::writeString(Json::StreamWriterBuilder(), report) << "\n";
-    file.close();
-    if (!file) throw std::runtime_error("cannot write " + options.json);
-  }
+  if (!options.json.empty()) writeJsonFile(options.json, report);
 
   std::cout << scans << " scans (" << integrated << " integrated, " << refused << " refused); "
             << statistics.blocks << " blocks, " << double(statistics.memory_bytes) / (1 << 20) << " MiB; "
@@ -358,22 +301,7 @@ void addMapCommand(CLI::App& app) {
   command->add_flag("--no-deskew", options->no_deskew,
                     "integrate each scan as if taken at one instant (default: the twist between its pose and the "
                     "next moves every column)");
-  command->add_option("--voxel", map.grid.voxel_size_m, "voxel size, m")->capture_default_str();
-  command->add_option("--truncation", map.integrator.truncation_m, "TSDF truncation, m (0: 3 voxels)")
-      ->capture_default_str();
-  command->add_option("--block-edge", map.grid.block_edge, "voxels per block edge: 8 or 16")->capture_default_str();
-  command->add_option("--min-range", map.integrator.min_range_m, "ignore returns closer than this, m")
-      ->capture_default_str();
-  command->add_option("--max-range", map.integrator.max_range_m, "ignore returns farther than this, m")
-      ->capture_default_str();
-  command->add_option("--stride", map.integrator.point_stride,
-                      "block activation reads every N-th pixel in rows and columns")
-      ->capture_default_str();
-  command->add_option("--max-weight", map.integrator.max_weight, "running-average weight cap")->capture_default_str();
-  command->add_option("--memory-radius", map.memory_radius_m,
-                      "drop blocks farther than this from the sensor, m (0: keep all); their mesh is kept")
-      ->capture_default_str();
-  command->add_flag("--intensity", map.grid.store_intensity, "store intensity in the voxels and the mesh");
+  addMapOptions(command, map);
   command->callback([options] { runMap(*options); });
 }
 

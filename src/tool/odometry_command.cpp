@@ -2,6 +2,7 @@
 // metadata, a KITTI velodyne folder, or a folder written by rim simulate),
 // written as KITTI and TUM poses plus per-frame statistics.
 #include "commands.h"
+#include "outputs.h"
 #include "progress.h"
 
 #include "range_image_mapping/io/pose_file.h"
@@ -26,46 +27,21 @@ namespace fs = std::filesystem;
 struct OdometryCommandOptions {
   io::RecordingOptions recording;
   std::string output;  // KITTI poses; the other files are named after it
-  bool no_deskew = false;
-  int deskew_passes = registration::OdometryOptions().deskew_passes;
-  double kernel_scale_m = 0.5;
-  double keyframe_distance_m = 0.0;
-  double keyframe_angle_deg = 0.0;
+  OdometryCommandLine odometry;
   std::string frame = "lidar";
 };
-
-// traj.txt -> traj_<suffix>
-std::string siblingPath(const std::string& output, const std::string& suffix) {
-  fs::path path(output);
-  return (path.parent_path() / (path.stem().string() + "_" + suffix)).string();
-}
-
-double median(std::vector<double> values) {
-  if (values.empty()) return 0.0;
-  std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
-  return values[values.size() / 2];
-}
 
 int runOdometry(const OdometryCommandOptions& options) {
   const io::Recording recording = io::openRecording(options.recording);
   if (options.frame == "sensor" && !recording.ouster)
     throw std::invalid_argument("--frame sensor: KITTI scans have no Ouster sensor frame");
 
-  registration::OdometryOptions odometry_options;
-  odometry_options.deskew = !options.no_deskew;
-  odometry_options.deskew_passes = options.deskew_passes;
-  odometry_options.registration.kernel.scale_m = options.kernel_scale_m;
-  odometry_options.keyframe_distance_m = options.keyframe_distance_m;
-  odometry_options.keyframe_angle_rad = options.keyframe_angle_deg * M_PI / 180.0;
-  registration::LidarOdometry odometry(odometry_options);
+  registration::LidarOdometry odometry(options.odometry.options());
 
   const fs::path output(options.output);
   if (!output.parent_path().empty()) fs::create_directories(output.parent_path());
   const std::string frames_path = siblingPath(options.output, "frames.csv");
-  std::ofstream frames_file(frames_path);
-  if (!frames_file) throw std::runtime_error("cannot write " + frames_path);
-  frames_file << "frame,time_s,seconds,inliers,iterations,condition_number,residual_rms_m,degenerate,reset,"
-                 "skipped,warning\n";
+  OdometryFramesCsv frames_file(frames_path);
 
   std::cerr << "odometry over " << recording.description << "\n";
   std::vector<io::StampedPose> poses;
@@ -80,12 +56,7 @@ int runOdometry(const OdometryCommandOptions& options) {
     degenerate += update.degenerate;
     resets += update.reset && frames > 0;
     skipped += update.skipped;
-    std::string warning = update.warning;
-    std::replace(warning.begin(), warning.end(), ',', ';');
-    frames_file << frames << ',' << std::setprecision(15) << time_s << std::setprecision(6) << ',' << update.seconds
-                << ',' << update.inliers << ',' << update.iterations << ',' << update.condition_number << ','
-                << update.residual_rms_m << ',' << update.degenerate << ',' << update.reset << ','
-                << update.skipped << ',' << warning << '\n';
+    frames_file.add(frames, update);
     if (!update.warning.empty()) std::cerr << "\nwarning: frame " << frames << ": " << update.warning << "\n";
     ++frames;
     showProgress(frames, recording.expected_frames, started);
@@ -93,22 +64,12 @@ int runOdometry(const OdometryCommandOptions& options) {
   });
   if (recording.expected_frames <= 0 || frames != recording.expected_frames) finishProgress();
   frames_file.close();
-  if (!frames_file) throw std::runtime_error("cannot write " + frames_path);
   if (frames == 0) throw std::runtime_error("no scans in " + recording.input);
   const double total_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
 
-  io::PoseFileInfo info;
-  info.frame = recording.frame;
-  info.world = "odom";
-  info.comment = "rim odometry " + recording.input + (options.no_deskew ? " --no-deskew" : "");
-  std::vector<io::StampedPose> written = poses;
-  if (options.frame == "sensor") {
-    info.frame = "os_sensor";
-    written = io::changePoseFrame(poses, recording.ouster->intrinsics.lidar_to_sensor);
-  }
-  io::writeKittiPosesWithTimes(options.output, written, info);
-  const std::string tum_path = siblingPath(options.output, "tum.txt");
-  io::writeTumPoses(tum_path, written, info);
+  const std::string tum_path =
+      writeTrajectory(options.output, poses, recording, options.frame == "sensor",
+                      "rim odometry " + recording.input + (options.odometry.no_deskew ? " --no-deskew" : ""));
 
   double mean_seconds = 0.0;
   for (double seconds : step_seconds) mean_seconds += seconds / double(step_seconds.size());
@@ -119,10 +80,9 @@ int runOdometry(const OdometryCommandOptions& options) {
   summary["degenerate"] = degenerate;
   summary["resets"] = resets;
   summary["skipped"] = skipped;
-  summary["deskew"] = !options.no_deskew;
-  summary["deskew_passes"] = options.deskew_passes;
-  summary["kernel_scale_m"] = options.kernel_scale_m;
-  summary["frame"] = info.frame;
+  const Json::Value odometry_json = options.odometry.json();
+  for (const std::string& key : odometry_json.getMemberNames()) summary[key] = odometry_json[key];
+  summary["frame"] = options.frame == "sensor" ? "os_sensor" : recording.frame;
   summary["step_seconds_mean"] = mean_seconds;
   summary["step_seconds_median"] = median(step_seconds);
   summary["step_seconds_max"] = step_seconds.empty() ? 0.0 : *std::max_element(step_seconds.begin(), step_seconds.end());
@@ -132,10 +92,7 @@ int runOdometry(const OdometryCommandOptions& options) {
   summary["poses_tum"] = tum_path;
   summary["frames_csv"] = frames_path;
   const std::string summary_path = siblingPath(options.output, "summary.json");
-  std::ofstream summary_file(summary_path);
-  summary_file << Json::writeString(Json::StreamWriterBuilder(), summary) << "\n";
-  summary_file.close();
-  if (!summary_file) throw std::runtime_error("cannot write " + summary_path);
+  writeJsonFile(summary_path, summary);
 
   std::cout << frames << " scans, " << poses.size() << " poses (" << degenerate << " degenerate, " << resets
             << " resets, " << skipped << " skipped); odometry step " << mean_seconds * 1e3 << " ms mean, "
@@ -162,21 +119,7 @@ void addOdometryCommand(CLI::App& app) {
   command->add_flag("--kitti", options->recording.kitti, "INPUT is a KITTI velodyne folder (synthetic HDL-64E model)");
   command->add_option("--frames", options->recording.frames, "process only the first N scans")
       ->check(CLI::PositiveNumber);
-  command->add_flag("--no-deskew", options->no_deskew, "register the scans as measured");
-  command->add_option("--deskew-passes", options->deskew_passes,
-                      "at most this many times a scan is deskewed again with the velocity its registration "
-                      "gave and registered again (0: deskewed with the previous step's velocity only)")
-      ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
-  command->add_option("--kernel-scale", options->kernel_scale_m,
-                      "robust kernel scale, m (paper: 0.5 outdoors, 0.2 indoors)")
-      ->capture_default_str()
-      ->check(CLI::PositiveNumber);
-  command->add_option("--keyframe-distance", options->keyframe_distance_m,
-                      "register to a keyframe renewed after this distance, m (0: previous scan)")
-      ->check(CLI::NonNegativeNumber);
-  command->add_option("--keyframe-angle", options->keyframe_angle_deg, "... or after this rotation, degrees")
-      ->check(CLI::NonNegativeNumber);
+  addOdometryOptions(command, options->odometry);
   command->add_option("--frame", options->frame, "whose poses: lidar (the image's frame) or sensor (Ouster)")
       ->capture_default_str()
       ->check(CLI::IsMember({"lidar", "sensor"}));

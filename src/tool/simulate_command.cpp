@@ -337,13 +337,32 @@ int runSimulate(SimulateOptions options) {
 
 }  // namespace
 
+std::vector<std::string> simulationPresetNames() {
+  std::vector<std::string> names;
+  for (const Preset& preset : kPresets) names.push_back(preset.name);
+  return names;
+}
+
+bool isIndoorPreset(const std::string& preset) {
+  for (const Preset& candidate : kPresets)
+    if (preset == candidate.name) return candidate.scene == SceneKind::kIndoor;
+  return false;
+}
+
+void simulatePreset(const std::string& preset, const std::string& directory, int frames) {
+  SimulateOptions options;
+  options.preset = preset;
+  options.output_directory = directory;
+  options.frames = frames;
+  runSimulate(options);
+}
+
 void addSimulateCommand(CLI::App& app) {
   auto options = std::make_shared<SimulateOptions>();
   CLI::App* command = app.add_subcommand(
       "simulate", "Simulate a spinning LiDAR in a scene: sensor data plus exact ground truth");
-  std::vector<std::string> preset_names;
-  for (const Preset& preset : kPresets) preset_names.push_back(preset.name);
-  command->add_option("--preset", options->preset, "ready-made sequence")->check(CLI::IsMember(preset_names));
+  command->add_option("--preset", options->preset, "ready-made sequence")
+      ->check(CLI::IsMember(simulationPresetNames()));
   command->add_option("--out,-o", options->output_directory, "output directory")->required();
   command->add_option("--frames", options->frames, "number of scans (default: the preset's)")
       ->check(CLI::Range(1, 100000));

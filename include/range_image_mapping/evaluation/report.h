@@ -68,6 +68,17 @@ void plotTrajectoryTopView(const TrajectoryEvaluation& evaluation, const std::st
 // The paper's Fig. 6: one box per frame distance, rotation and translation panels.
 void plotPairwiseErrors(const TrajectoryEvaluation& evaluation, const std::string& png_path);
 
+// What rim run draws in report.png.
+struct RunPlotData {
+  std::vector<Eigen::Isometry3d> estimate;      // aligned to the ground truth when there is one
+  std::vector<Eigen::Isometry3d> ground_truth;  // empty, or one per estimate pose
+  std::vector<double> position_errors_m;        // empty, or one per estimate pose
+  std::vector<double> odometry_ms, integrate_ms;  // per used scan
+};
+// Three panels: the trajectory top view (with the ground truth), the time per
+// scan of odometry and integration, and the position error per scan.
+void plotRunReport(const RunPlotData& data, const std::string& png_path);
+
 // uint8 red/green/blue per point from its distance: blue (0) through green to
 // yellow (just under threshold), red at or beyond the threshold; the distance
 // itself as a float property "distance".

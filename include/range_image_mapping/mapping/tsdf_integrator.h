@@ -13,6 +13,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 namespace range_image_mapping::mapping {
@@ -53,16 +54,24 @@ struct ScanPose {
 struct IntegrationStatistics {
   std::size_t points_used = 0;       // valid pixels in range, after stride
   std::size_t blocks_touched = 0;    // blocks integrated this scan
+  // New blocks kept: a new block that no voxel projection wrote to is removed again.
   std::size_t blocks_created = 0;
   std::size_t blocks_refused = 0;    // not created: the grid's max_blocks was reached
   std::size_t voxels_updated = 0;
+  std::size_t blocks_removed = 0;    // deintegrate: blocks left without any observation, removed
   double activation_seconds = 0.0;   // finding / creating blocks
   double integration_seconds = 0.0;  // projecting voxels and averaging
 };
 
+// Move-only: it keeps per-thread buffers between scans, so one integrator
+// integrates one scan at a time (it is parallel inside).
 class TsdfIntegrator {
  public:
+  // The options are checked against the grid by integrate().
   explicit TsdfIntegrator(TsdfIntegratorOptions options = {});
+  ~TsdfIntegrator();
+  TsdfIntegrator(TsdfIntegrator&&) noexcept;
+  TsdfIntegrator& operator=(TsdfIntegrator&&) noexcept;
   const TsdfIntegratorOptions& options() const { return options_; }
 
   // Integrates a staggered range image. Throws MappingError for a
@@ -70,6 +79,9 @@ class TsdfIntegrator {
   // or options that do not fit the grid; the grid is unchanged then. An image
   // without valid pixels integrates nothing. Bumps grid.nextGeneration().
   IntegrationStatistics integrate(VoxelBlockGrid& grid, const RangeImage& scan, const ScanPose& pose);
+  // The checks integrate() makes first: throws MappingError naming the
+  // problem (for callers that refuse a scan without an exception).
+  void validate(const VoxelBlockGrid& grid, const RangeImage& scan, const ScanPose& pose) const;
   // Removes a scan integrated before with the same pose (weights subtract;
   // voxels whose weight returns to 0 become unobserved). Used to undo a scan.
   IntegrationStatistics deintegrate(VoxelBlockGrid& grid, const RangeImage& scan, const ScanPose& pose);
@@ -82,6 +94,9 @@ class TsdfIntegrator {
   std::vector<BlockKey> touched_keys_;
   std::vector<VoxelBlock*> touched_blocks_;
   std::vector<ColumnMotion> column_motion_;
+  // Per-thread block sets and voxel buffers, per-pixel sample weights, ...
+  struct Workspace;
+  std::unique_ptr<Workspace> workspace_;
 };
 
 }  // namespace range_image_mapping::mapping

@@ -73,8 +73,13 @@ class VoxelBlockGrid {
   int voxelsPerBlock() const { return options_.block_edge * options_.block_edge * options_.block_edge; }
   double blockSize() const { return options_.voxel_size_m * options_.block_edge; }
 
-  // Block holding the lattice point nearest below `point` (floor division).
+  // Block holding the lattice point nearest below `point` (floor division;
+  // a lattice point off by rounding counts as that lattice point). Throws
+  // MappingError for a coordinate that is not finite or beyond 2^30 voxels.
   BlockKey blockKeyOf(const Eigen::Vector3d& point_world) const;
+  // The largest |coordinate / voxel size| the grid accepts: voxel and block
+  // indices stay far from int overflow.
+  static constexpr double kLargestLatticeIndex = double(1 << 30);
   // World position of voxel (i, j, k) of a block.
   Eigen::Vector3d voxelPosition(const BlockKey& key, int i, int j, int k) const;
 
@@ -89,6 +94,7 @@ class VoxelBlockGrid {
 
   std::size_t blockCount() const;
   // Bytes of voxel storage plus the hash table: what the map costs in RAM.
+  // Removed blocks keep their arrays for reuse until clear(), and count.
   std::size_t memoryBytes() const;
   // Every block, in no particular order (stable between modifications).
   std::vector<const VoxelBlock*> blocks() const;
@@ -98,6 +104,9 @@ class VoxelBlockGrid {
   // (bounded memory for long runs); appends their keys to `removed` if given.
   std::size_t removeBlocksFartherThan(const Eigen::Vector3d& centre_world, double radius_m,
                                       std::vector<BlockKey>* removed = nullptr);
+  // Removes one block (false if absent); its slot is reused.
+  bool remove(const BlockKey& key);
+  // Removes every block and gives the memory back.
   void clear();
 
   // Monotonic counter bumped by each integration (TsdfIntegrator); blocks

@@ -18,11 +18,13 @@ struct OdometryOptions {
   RegistrationOptions registration;
   bool deskew = true;
   bool constant_velocity_prior = true;
-  // At most this many times the source is deskewed again with the velocity
-  // its registration gave, then registered again at the finest level (0:
-  // deskewed with the previous step's velocity only).
+  // At the finest level, at most this many times the source is deskewed
+  // again with the velocity the current pose implies, each followed by one
+  // Gauss-Newton step (0: deskewed with the previous step's velocity only).
+  // When the pose has not settled by then, the finest level runs to
+  // convergence on the last deskew.
   int deskew_passes = 10;
-  // ... until a pass moves the pose by less than these.
+  // ... until a step moves the pose by less than these.
   double deskew_convergence_rad = 1e-5;
   double deskew_convergence_m = 1e-4;
   // Degenerate when the hessian's condition number exceeds this or fewer pairs
@@ -87,6 +89,7 @@ class LidarOdometry {
   void moveColumns(const VertexNormalMap& measured, VertexNormalMap& moved) const;
   // deskewed_ from measured_ (which must hold the scan's map).
   void deskew(const RangeImage& scan, uint64_t stamp_ns, const Eigen::Matrix<double, 6, 1>& twist);
+  // From the scan and measured_ (its full-resolution map).
   void makeTarget(const RangeImage& scan, bool deskewed);
 
   OdometryOptions options_;
