@@ -435,7 +435,8 @@ void plotRunReport(const RunPlotData& data, const std::string& png_path) {
   if (data.estimate.empty()) throw PlotError("no poses to plot for " + png_path);
   const bool truth = data.ground_truth.size() == data.estimate.size();
   const bool errors = data.position_errors_m.size() == data.estimate.size();
-  const std::array<int, 2> axes = topViewAxes(truth ? data.ground_truth : data.estimate);
+  // rim run's poses are of a lidar frame, z up: the top view is x-y.
+  const std::array<int, 2> axes{0, 1};
   static constexpr std::array<const char*, 3> kAxisNames{"x", "y", "z"};
   TemporaryDirectory directory;
   const std::string poses_path = directory.file("poses.dat"), timing_path = directory.file("timing.dat");

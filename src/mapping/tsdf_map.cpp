@@ -77,8 +77,17 @@ MapUpdate TsdfMap::integrate(const RangeImage& scan, const ScanPose& pose) {
   has_last_pose_ = true;
   last_pose_ = pose.world_from_lidar;
   refused_jumps_ = 0;
-  if (options_.memory_radius_m > 0.0)
-    update.blocks_dropped = grid_.removeBlocksFartherThan(pose.world_from_lidar.translation(), options_.memory_radius_m);
+  if (options_.memory_radius_m > 0.0) {
+    const std::vector<BlockKey> far =
+        grid_.blocksFartherThan(pose.world_from_lidar.translation(), options_.memory_radius_m);
+    if (!far.empty() && options_.keep_dropped_mesh) {
+      extractor_.update(grid_);  // their chunks, current before the blocks go
+      for (const BlockKey& key : far)
+        if (const MeshChunk* chunk = extractor_.chunk(key)) dropped_chunks_.push_back(*chunk);
+    }
+    for (const BlockKey& key : far) grid_.remove(key);
+    update.blocks_dropped = far.size();
+  }
 
   update.warning = jump_note;
   if (update.integration.blocks_refused > 0) {
@@ -102,10 +111,21 @@ MapStatistics TsdfMap::statistics() const {
   return statistics;
 }
 
-void TsdfMap::saveMesh(const std::string& path) {
+TriangleMeshData TsdfMap::fullMesh() {
   updateMesh();
-  writeMeshPly(path, extractor_.combined());
+  TriangleMeshData mesh = extractor_.combined();
+  for (const MeshChunk& chunk : dropped_chunks_) {
+    const int offset = int(mesh.vertices.size());
+    mesh.vertices.insert(mesh.vertices.end(), chunk.vertices.begin(), chunk.vertices.end());
+    mesh.normals.insert(mesh.normals.end(), chunk.normals.begin(), chunk.normals.end());
+    mesh.intensities.insert(mesh.intensities.end(), chunk.intensities.begin(), chunk.intensities.end());
+    for (const Eigen::Vector3i& triangle : chunk.triangles)
+      mesh.triangles.push_back(triangle + Eigen::Vector3i::Constant(offset));
+  }
+  return mesh;
 }
+
+void TsdfMap::saveMesh(const std::string& path) { writeMeshPly(path, fullMesh()); }
 
 void TsdfMap::reset() {
   grid_.clear();
@@ -113,6 +133,7 @@ void TsdfMap::reset() {
   has_last_pose_ = false;
   last_pose_ = Eigen::Isometry3d::Identity();
   refused_jumps_ = 0;
+  dropped_chunks_.clear();
   scans_integrated_ = scans_refused_ = 0;
 }
 

@@ -137,27 +137,26 @@ std::vector<VoxelBlock*> VoxelBlockGrid::blocks() {
   return result;
 }
 
-std::size_t VoxelBlockGrid::removeBlocksFartherThan(const Eigen::Vector3d& centre_world, double radius_m,
-                                                    std::vector<BlockKey>* removed) {
+std::vector<BlockKey> VoxelBlockGrid::blocksFartherThan(const Eigen::Vector3d& centre_world, double radius_m) const {
   if (!centre_world.allFinite() || !(radius_m >= 0.0))
-    throw MappingError("removeBlocksFartherThan needs a finite centre and a radius >= 0, got radius " +
+    throw MappingError("blocksFartherThan needs a finite centre and a radius >= 0, got radius " +
                        numberText(radius_m));
-  Storage& storage = *storage_;
   const double half_block = 0.5 * blockSize();
   const double radius_squared = radius_m * radius_m;
-  std::size_t count = 0;
-  for (auto it = storage.slots.begin(); it != storage.slots.end();) {
-    const Eigen::Vector3d centre = it->first.cast<double>() * blockSize() + Eigen::Vector3d::Constant(half_block);
-    if ((centre - centre_world).squaredNorm() > radius_squared) {
-      storage.free_slots.push_back(it->second);
-      if (removed) removed->push_back(it->first);
-      it = storage.slots.erase(it);
-      ++count;
-    } else {
-      ++it;
-    }
+  std::vector<BlockKey> far;
+  for (const auto& [key, slot] : storage_->slots) {
+    const Eigen::Vector3d centre = key.cast<double>() * blockSize() + Eigen::Vector3d::Constant(half_block);
+    if ((centre - centre_world).squaredNorm() > radius_squared) far.push_back(key);
   }
-  return count;
+  return far;
+}
+
+std::size_t VoxelBlockGrid::removeBlocksFartherThan(const Eigen::Vector3d& centre_world, double radius_m,
+                                                    std::vector<BlockKey>* removed) {
+  const std::vector<BlockKey> far = blocksFartherThan(centre_world, radius_m);
+  for (const BlockKey& key : far) remove(key);
+  if (removed) removed->insert(removed->end(), far.begin(), far.end());
+  return far.size();
 }
 
 bool VoxelBlockGrid::remove(const BlockKey& key) {

@@ -96,24 +96,6 @@ void checkPoseCount(std::size_t poses, std::size_t scans, bool stopped_by_frames
                                 " scans (one pose per scan, matched by index)");
 }
 
-// Appends a chunk or a mesh (both have these four members) to a mesh.
-template <typename Triangles>
-void appendTriangles(const Triangles& part, mapping::TriangleMeshData& mesh) {
-  const int offset = int(mesh.vertices.size());
-  mesh.vertices.insert(mesh.vertices.end(), part.vertices.begin(), part.vertices.end());
-  mesh.normals.insert(mesh.normals.end(), part.normals.begin(), part.normals.end());
-  mesh.intensities.insert(mesh.intensities.end(), part.intensities.begin(), part.intensities.end());
-  for (const Eigen::Vector3i& triangle : part.triangles)
-    mesh.triangles.push_back(triangle + Eigen::Vector3i::Constant(offset));
-}
-
-// With a memory radius, blocks far behind the sensor leave the grid; their
-// mesh chunks are kept in `archive` so the written mesh covers the whole run.
-void archiveDroppedChunks(const mapping::TsdfMap& map, mapping::TriangleMeshData& archive) {
-  for (const mapping::MeshChunk* chunk : map.mesh().chunks())
-    if (!map.grid().find(chunk->key) && !chunk->triangles.empty()) appendTriangles(*chunk, archive);
-}
-
 struct StageTimes {
   double read = 0, integrate = 0, mesh = 0, write = 0, evaluate = 0;
   std::vector<double> integrate_per_scan;
@@ -155,7 +137,6 @@ int runMap(const MapCommandOptions& options) {
   StageTimes times;
   std::size_t scans = 0, integrated = 0, refused = 0, warnings = 0, blocks_refused = 0, blocks_dropped = 0;
   std::size_t points_used = 0;
-  mapping::TriangleMeshData archive;  // chunks of blocks dropped by the memory radius
 
   // Scan k's twist comes from poses k and k+1 (its own sweep), so each scan is
   // integrated once the next one has arrived; the last reuses the previous twist.
@@ -172,14 +153,6 @@ int runMap(const MapCommandOptions& options) {
     const double seconds = secondsSince(integrate_started);
     times.integrate += seconds;
     times.integrate_per_scan.push_back(seconds);
-    if (options.map.memory_radius_m > 0) {
-      // Keep what the radius dropped, then mesh what this scan changed so
-      // the chunks are current when their blocks go.
-      const auto mesh_started = Clock::now();
-      if (update.blocks_dropped > 0) archiveDroppedChunks(map, archive);
-      map.updateMesh();
-      times.mesh += secondsSince(mesh_started);
-    }
     integrated += update.integrated;
     refused += !update.integrated;
     blocks_refused += update.integration.blocks_refused;
@@ -222,10 +195,7 @@ int runMap(const MapCommandOptions& options) {
                              std::to_string(warnings) + " warnings above)");
 
   const auto mesh_started = Clock::now();
-  map.updateMesh();
-  if (options.map.memory_radius_m > 0) archiveDroppedChunks(map, archive);
-  mapping::TriangleMeshData mesh = map.mesh().combined();
-  appendTriangles(archive, mesh);
+  const mapping::TriangleMeshData mesh = map.fullMesh();  // with the mesh of blocks the radius dropped
   times.mesh += secondsSince(mesh_started);
   const auto write_started = Clock::now();
   writeMeshAtomically(options.output, mesh);

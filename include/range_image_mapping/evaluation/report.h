@@ -75,7 +75,7 @@ struct RunPlotData {
   std::vector<double> position_errors_m;        // empty, or one per estimate pose
   std::vector<double> odometry_ms, integrate_ms;  // per used scan
 };
-// Three panels: the trajectory top view (with the ground truth), the time per
+// Three panels: the trajectory top view (x-y: lidar frames are z up; with the ground truth), the time per
 // scan of odometry and integration, and the position error per scan.
 void plotRunReport(const RunPlotData& data, const std::string& png_path);
 

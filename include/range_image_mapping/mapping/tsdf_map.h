@@ -10,6 +10,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace range_image_mapping::mapping {
 
@@ -20,6 +21,10 @@ struct TsdfMapOptions {
   // Blocks farther than this from the sensor are dropped after each scan
   // (0 = keep everything). Must exceed the integrator's max range.
   double memory_radius_m = 0.0;
+  // Keep the mesh of dropped blocks (in memory, a small fraction of their
+  // voxels), so fullMesh() and saveMesh() cover the whole run. Off for runs
+  // that must stay at flat memory.
+  bool keep_dropped_mesh = true;
   // A pose this far (metres) from the last integrated one is refused as a
   // jump (0 = accept any); after max_refused_jumps refusals in a row the new
   // position is accepted, since the pose source has really moved on.
@@ -54,7 +59,11 @@ class TsdfMap {
   const VoxelBlockGrid& grid() const { return grid_; }
   const TsdfMapOptions& options() const { return options_; }
   MapStatistics statistics() const;
-  // The whole current mesh as a binary PLY (updates the mesh first).
+  // The mesh of the whole run: the current grid's (updated first) plus the
+  // kept chunks of dropped blocks.
+  TriangleMeshData fullMesh();
+  const std::vector<MeshChunk>& droppedChunks() const { return dropped_chunks_; }
+  // fullMesh() as a binary PLY.
   void saveMesh(const std::string& path);
   void reset();
 
@@ -66,6 +75,7 @@ class TsdfMap {
   bool has_last_pose_ = false;
   Eigen::Isometry3d last_pose_ = Eigen::Isometry3d::Identity();
   int refused_jumps_ = 0;
+  std::vector<MeshChunk> dropped_chunks_;
   std::size_t scans_integrated_ = 0, scans_refused_ = 0;
 };
 

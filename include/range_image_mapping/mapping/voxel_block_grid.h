@@ -100,8 +100,10 @@ class VoxelBlockGrid {
   std::vector<const VoxelBlock*> blocks() const;
   std::vector<VoxelBlock*> blocks();
 
-  // Removes blocks whose centre is farther than radius_m from centre_world
-  // (bounded memory for long runs); appends their keys to `removed` if given.
+  // Blocks whose centre is farther than radius_m from centre_world.
+  std::vector<BlockKey> blocksFartherThan(const Eigen::Vector3d& centre_world, double radius_m) const;
+  // Removes those blocks (bounded memory for long runs); appends their keys
+  // to `removed` if given.
   std::size_t removeBlocksFartherThan(const Eigen::Vector3d& centre_world, double radius_m,
                                       std::vector<BlockKey>* removed = nullptr);
   // Removes one block (false if absent); its slot is reused.

@@ -1,0 +1,210 @@
+#include "outputs.h"
+
+#include "range_image_mapping/evaluation/report.h"
+#include "range_image_mapping/evaluation/surface_metrics.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <iomanip>
+#include <sstream>
+
+namespace range_image_mapping::tool {
+
+namespace fs = std::filesystem;
+
+double median(std::vector<double> values) {
+  if (values.empty()) return 0.0;
+  std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
+  return values[values.size() / 2];
+}
+
+std::string siblingPath(const std::string& output, const std::string& suffix) {
+  fs::path path(output);
+  return (path.parent_path() / (path.stem().string() + "_" + suffix)).string();
+}
+
+void writeJsonFile(const std::string& path, const Json::Value& value) {
+  const fs::path json_path(path);
+  if (!json_path.parent_path().empty()) fs::create_directories(json_path.parent_path());
+  std::ofstream file(path);
+  file << Json::writeString(Json::StreamWriterBuilder(), value) << "\n";
+  file.close();
+  if (!file) throw std::runtime_error("cannot write " + path);
+}
+
+registration::OdometryOptions OdometryCommandLine::options() const {
+  registration::OdometryOptions options;
+  options.deskew = !no_deskew;
+  options.deskew_passes = deskew_passes;
+  options.registration.kernel.scale_m = kernel_scale_m;
+  options.keyframe_distance_m = keyframe_distance_m;
+  options.keyframe_angle_rad = keyframe_angle_deg * M_PI / 180.0;
+  return options;
+}
+
+Json::Value OdometryCommandLine::json() const {
+  Json::Value json;
+  json["deskew"] = !no_deskew;
+  json["deskew_passes"] = deskew_passes;
+  json["kernel_scale_m"] = kernel_scale_m;
+  json["keyframe_distance_m"] = keyframe_distance_m;
+  json["keyframe_angle_deg"] = keyframe_angle_deg;
+  return json;
+}
+
+void addOdometryOptions(CLI::App* command, OdometryCommandLine& odometry) {
+  command->add_flag("--no-deskew", odometry.no_deskew, "register and map the scans as measured");
+  command->add_option("--deskew-passes", odometry.deskew_passes,
+                      "at most this many times a scan is deskewed again with the velocity its registration "
+                      "gave and registered again (0: deskewed with the previous step's velocity only)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+  command->add_option("--kernel-scale", odometry.kernel_scale_m,
+                      "robust kernel scale, m (paper: 0.5 outdoors, 0.2 indoors)")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  command->add_option("--keyframe-distance", odometry.keyframe_distance_m,
+                      "register to a keyframe renewed after this distance, m (0: previous scan)")
+      ->check(CLI::NonNegativeNumber);
+  command->add_option("--keyframe-angle", odometry.keyframe_angle_deg, "... or after this rotation, degrees")
+      ->check(CLI::NonNegativeNumber);
+}
+
+void addMapOptions(CLI::App* command, mapping::TsdfMapOptions& map) {
+  command->add_option("--voxel", map.grid.voxel_size_m, "voxel size, m")->capture_default_str();
+  command->add_option("--truncation", map.integrator.truncation_m, "TSDF truncation, m (0: 3 voxels)")
+      ->capture_default_str();
+  command->add_option("--block-edge", map.grid.block_edge, "voxels per block edge: 8 or 16")->capture_default_str();
+  command->add_option("--min-range", map.integrator.min_range_m, "ignore returns closer than this, m")
+      ->capture_default_str();
+  command->add_option("--max-range", map.integrator.max_range_m, "ignore returns farther than this, m")
+      ->capture_default_str();
+  command->add_option("--stride", map.integrator.point_stride,
+                      "block activation reads every N-th pixel in rows and columns")
+      ->capture_default_str();
+  command->add_option("--max-weight", map.integrator.max_weight, "running-average weight cap")->capture_default_str();
+  command->add_option("--memory-radius", map.memory_radius_m,
+                      "drop blocks farther than this from the sensor, m (0: keep all); their mesh is kept")
+      ->capture_default_str();
+  command->add_flag("--intensity", map.grid.store_intensity, "store intensity in the voxels and the mesh");
+}
+
+Json::Value mapOptionsJson(const mapping::TsdfMapOptions& map, bool deskew) {
+  Json::Value json;
+  json["voxel_m"] = map.grid.voxel_size_m;
+  json["block_edge"] = map.grid.block_edge;
+  json["truncation_m"] = map.integrator.truncationFor(map.grid);
+  json["min_range_m"] = map.integrator.min_range_m;
+  json["max_range_m"] = map.integrator.max_range_m;
+  json["point_stride"] = map.integrator.point_stride;
+  json["max_weight"] = map.integrator.max_weight;
+  json["memory_radius_m"] = map.memory_radius_m;
+  json["intensity"] = map.grid.store_intensity;
+  json["deskew"] = deskew;
+  return json;
+}
+
+OdometryFramesCsv::OdometryFramesCsv(const std::string& path) : path_(path), file_(path) {
+  if (!file_) throw std::runtime_error("cannot write " + path);
+  file_ << "frame,time_s,seconds,inliers,iterations,condition_number,residual_rms_m,degenerate,reset,"
+           "skipped,warning\n";
+}
+
+void OdometryFramesCsv::add(int frame, const registration::OdometryUpdate& update) {
+  std::string warning = update.warning;
+  std::replace(warning.begin(), warning.end(), ',', ';');
+  file_ << frame << ',' << std::setprecision(15) << double(update.stamp_ns) * 1e-9 << std::setprecision(6) << ','
+        << update.seconds << ',' << update.inliers << ',' << update.iterations << ',' << update.condition_number
+        << ',' << update.residual_rms_m << ',' << update.degenerate << ',' << update.reset << ','
+        << update.skipped << ',' << warning << '\n';
+}
+
+void OdometryFramesCsv::close() {
+  file_.close();
+  if (!file_) throw std::runtime_error("cannot write " + path_);
+}
+
+std::string writeTrajectory(const std::string& kitti_path, const std::vector<io::StampedPose>& poses,
+                            const io::Recording& recording, bool sensor_frame, const std::string& comment) {
+  if (sensor_frame && !recording.ouster)
+    throw std::invalid_argument("poses of the sensor frame: " + recording.input + " has no Ouster sensor frame");
+  io::PoseFileInfo info;
+  info.frame = sensor_frame ? "os_sensor" : recording.frame;
+  info.world = "odom";
+  info.comment = comment;
+  const std::vector<io::StampedPose> written =
+      sensor_frame ? io::changePoseFrame(poses, recording.ouster->intrinsics.lidar_to_sensor) : poses;
+  const fs::path output(kitti_path);
+  if (!output.parent_path().empty()) fs::create_directories(output.parent_path());
+  io::writeKittiPosesWithTimes(kitti_path, written, info);
+  const std::string tum_path = siblingPath(kitti_path, "tum.txt");
+  io::writeTumPoses(tum_path, written, info);
+  return tum_path;
+}
+
+void writeMeshAtomically(const std::string& path, const mapping::TriangleMeshData& mesh) {
+  const fs::path destination(path);
+  if (!destination.parent_path().empty()) fs::create_directories(destination.parent_path());
+  const fs::path partial = destination.parent_path() / (destination.stem().string() + ".partial.ply");
+  try {
+    mapping::writeMeshPly(partial.string(), mesh);
+  } catch (...) {
+    fs::remove(partial);
+    throw;
+  }
+  fs::rename(partial, destination);
+}
+
+namespace {
+
+SurfaceEvaluation evaluateSamples(const std::string& mesh_path, const evaluation::SurfaceSample& estimate,
+                                  const std::string& truth_path, const evaluation::SurfaceSample& truth,
+                                  double voxel_m, double spacing_m) {
+  const evaluation::SurfaceMetrics metrics =
+      evaluation::compareSurfaces(estimate.points, truth.points, 3.0 * voxel_m);
+  evaluation::SurfaceReportContext context;
+  context.estimate = evaluation::describeSurface(mesh_path, estimate);
+  context.ground_truth = evaluation::describeSurface(truth_path, truth);
+  context.voxel_m = voxel_m;
+  context.sample_spacing_m = spacing_m;
+  SurfaceEvaluation result;
+  std::istringstream text(evaluation::surfaceReportJson(metrics, context));
+  std::string errors;
+  Json::parseFromStream(Json::CharReaderBuilder(), text, &result.json, &errors);
+  result.summary_line = evaluation::surfaceSummaryLine(metrics);
+  result.f_score = metrics.f_score;
+  return result;
+}
+
+evaluation::SurfaceSamplingOptions samplingFor(double voxel_m) {
+  evaluation::SurfaceSamplingOptions sampling;
+  sampling.spacing_m = 3.0 * voxel_m / 4.0;  // a quarter of the threshold, as rim eval mesh
+  return sampling;
+}
+
+}  // namespace
+
+SurfaceEvaluation evaluateMeshFile(const std::string& mesh_path, const std::string& truth_path, double voxel_m) {
+  const evaluation::SurfaceSamplingOptions sampling = samplingFor(voxel_m);
+  return evaluateSamples(mesh_path, evaluation::loadSurfaceSample(mesh_path, sampling), truth_path,
+                         evaluation::loadSurfaceSample(truth_path, sampling), voxel_m, sampling.spacing_m);
+}
+
+SurfaceEvaluation evaluateMeshFileWithinRange(const std::string& mesh_path, const std::string& truth_path,
+                                              double voxel_m, const std::vector<Eigen::Vector3f>& sensor_positions,
+                                              double range_m) {
+  const evaluation::SurfaceSamplingOptions sampling = samplingFor(voxel_m);
+  evaluation::SurfaceSample truth = evaluation::loadSurfaceSample(truth_path, sampling);
+  const std::vector<float> distances = evaluation::nearestDistances(truth.points, sensor_positions);
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < truth.points.size(); ++i)
+    if (distances[i] <= range_m) truth.points[kept++] = truth.points[i];
+  truth.points.resize(kept);
+  SurfaceEvaluation result = evaluateSamples(mesh_path, evaluation::loadSurfaceSample(mesh_path, sampling),
+                                             truth_path, truth, voxel_m, sampling.spacing_m);
+  result.json["ground_truth_within_range_m"] = range_m;
+  return result;
+}
+
+}  // namespace range_image_mapping::tool

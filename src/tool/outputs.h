@@ -1,0 +1,78 @@
+// What several subcommands share: the odometry and mapping options on the
+// command line, and the files they write (pose files, the per-frame CSV,
+// meshes, JSON reports), so rim odometry, rim map and rim run agree.
+#pragma once
+
+#include "range_image_mapping/io/pose_file.h"
+#include "range_image_mapping/io/recording.h"
+#include "range_image_mapping/mapping/tsdf_map.h"
+#include "range_image_mapping/registration/lidar_odometry.h"
+
+#include <CLI/CLI.hpp>
+#include <json/json.h>
+
+#include <fstream>
+#include <string>
+#include <vector>
+
+namespace range_image_mapping::tool {
+
+double median(std::vector<double> values);
+// traj.txt -> traj_<suffix>
+std::string siblingPath(const std::string& output, const std::string& suffix);
+// Pretty JSON; creates the folder; throws naming the file when it cannot write.
+void writeJsonFile(const std::string& path, const Json::Value& value);
+
+// Odometry settings on the command line (rim odometry, rim run).
+struct OdometryCommandLine {
+  bool no_deskew = false;
+  int deskew_passes = registration::OdometryOptions().deskew_passes;
+  double kernel_scale_m = 0.5;
+  double keyframe_distance_m = 0.0;
+  double keyframe_angle_deg = 0.0;
+  registration::OdometryOptions options() const;
+  Json::Value json() const;
+};
+void addOdometryOptions(CLI::App* command, OdometryCommandLine& odometry);
+
+// Mapping settings on the command line (rim map, rim run), into the core's options.
+void addMapOptions(CLI::App* command, mapping::TsdfMapOptions& map);
+Json::Value mapOptionsJson(const mapping::TsdfMapOptions& map, bool deskew);
+
+// One row per odometry step: time, cost, inliers, why a scan was not used.
+class OdometryFramesCsv {
+ public:
+  explicit OdometryFramesCsv(const std::string& path);  // throws when it cannot write
+  void add(int frame, const registration::OdometryUpdate& update);
+  void close();  // throws when the file could not be written
+
+ private:
+  std::string path_;
+  std::ofstream file_;
+};
+
+// KITTI poses (with their times file and sidecar) at kitti_path and TUM poses
+// at <stem>_tum.txt, in the odom world: of the images' own frame, or of the
+// Ouster sensor frame when sensor_frame. Returns the TUM path.
+std::string writeTrajectory(const std::string& kitti_path, const std::vector<io::StampedPose>& poses,
+                            const io::Recording& recording, bool sensor_frame, const std::string& comment);
+
+// Writes next to the destination and renames, so a failed run never leaves a
+// truncated mesh under the name asked for.
+void writeMeshAtomically(const std::string& path, const mapping::TriangleMeshData& mesh);
+
+// A mesh file against a ground-truth surface at 3 voxels (the paper's
+// threshold), samples at a quarter of it: the JSON report and its summary line.
+struct SurfaceEvaluation {
+  Json::Value json;
+  std::string summary_line;
+  double f_score = 0.0;
+};
+SurfaceEvaluation evaluateMeshFile(const std::string& mesh_path, const std::string& truth_path, double voxel_m);
+// The same with the ground truth restricted to samples within range_m of a
+// sensor position (what a map clipped at range_m can hold).
+SurfaceEvaluation evaluateMeshFileWithinRange(const std::string& mesh_path, const std::string& truth_path,
+                                              double voxel_m, const std::vector<Eigen::Vector3f>& sensor_positions,
+                                              double range_m);
+
+}  // namespace range_image_mapping::tool

@@ -1,0 +1,351 @@
+// rim run: the whole pipeline offline, with no ROS master. Each scan goes
+// through the odometry, then into the TSDF map at the pose and velocity the
+// odometry gave, exactly as the Odometry and Mapper nodelets chain them.
+// INPUT is a recording or one of rim simulate's presets (simulated first).
+#include "commands.h"
+#include "outputs.h"
+#include "progress.h"
+
+#include "range_image_mapping/evaluation/report.h"
+#include "range_image_mapping/evaluation/trajectory_metrics.h"
+#include "range_image_mapping/io/pose_file.h"
+#include "range_image_mapping/io/recording.h"
+#include "range_image_mapping/mapping/tsdf_map.h"
+#include "range_image_mapping/registration/lidar_odometry.h"
+
+#include <json/json.h>
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+#include <optional>
+
+namespace range_image_mapping::tool {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+struct RunCommandOptions {
+  io::RecordingOptions recording;
+  std::string output_directory;
+  std::string environment;  // indoor or outdoor: voxel, range clip and kernel defaults
+  bool sensor_frame = false;
+  int mesh_every = 10;  // re-mesh after this many scans (1 s at 10 Hz), as the Mapper's mesh_rate
+  bool no_plot = false;
+  OdometryCommandLine odometry;
+  mapping::TsdfMapOptions map;
+};
+
+std::atomic<bool> interrupted{false};
+
+double secondsSince(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
+
+double peakResidentMegabytes() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return double(usage.ru_maxrss) / 1024.0;  // Linux: kilobytes
+}
+
+// The paper's settings (section 5): 4 cm voxels and a 10 m clip indoors,
+// 10 cm and 30 m outdoors, kernel scale 0.2 / 0.5 m. Options given on the
+// command line win.
+void applyEnvironment(const std::string& environment, const CLI::App& command, RunCommandOptions& options) {
+  const bool indoor = environment == "indoor";
+  const auto unset = [&](const char* name) { return command.get_option(name)->count() == 0; };
+  if (unset("--voxel")) options.map.grid.voxel_size_m = indoor ? 0.04 : 0.10;
+  if (unset("--max-range")) options.map.integrator.max_range_m = indoor ? 10.0 : 30.0;
+  if (unset("--kernel-scale")) options.odometry.kernel_scale_m = indoor ? 0.2 : 0.5;
+}
+
+struct FrameRecord {
+  double time_s = 0;
+  double odometry_ms = 0, integrate_ms = 0;
+  std::size_t inliers = 0;
+};
+
+struct GroundTruthComparison {
+  evaluation::TrajectoryEvaluation trajectory;
+  bool has_surface = false;
+  SurfaceEvaluation surface;
+};
+
+// The estimate against a simulated folder's ground truth: poses associated by
+// time (ATE after SE(3) alignment of the positions, as evo), and the mesh
+// moved into the ground-truth world by the first associated pose pair (the
+// odometry starts there; a position-only alignment leaves the roll about a
+// straight path free), compared with the seen surface within the range clip.
+GroundTruthComparison compareWithGroundTruth(const io::Recording& recording,
+                                             const std::vector<io::StampedPose>& estimate,
+                                             const mapping::TriangleMeshData& mesh, double voxel_m,
+                                             double range_m, const std::string& aligned_mesh_path) {
+  GroundTruthComparison comparison;
+  evaluation::StampedTrajectory estimated, truth;
+  for (const io::StampedPose& pose : estimate) {
+    estimated.times_s.push_back(pose.time_s);
+    estimated.poses.push_back(pose.pose);
+  }
+  for (const io::StampedPose& pose : io::readKittiPosesWithTimes(recording.ground_truth.poses)) {
+    truth.times_s.push_back(pose.time_s);
+    truth.poses.push_back(pose.pose);
+  }
+  const evaluation::AssociatedPoses associated = evaluation::associateByTimestamp(estimated, truth, 0.01);
+  comparison.trajectory = evaluation::evaluateTrajectory(associated.estimate, associated.ground_truth);
+  if (!recording.ground_truth.surface.empty() && !mesh.triangles.empty()) {
+    mapping::TriangleMeshData aligned = mesh;
+    const Eigen::Isometry3f alignment =
+        (associated.ground_truth.front() * associated.estimate.front().inverse()).cast<float>();
+    for (Eigen::Vector3f& vertex : aligned.vertices) vertex = alignment * vertex;
+    for (Eigen::Vector3f& normal : aligned.normals) normal = alignment.linear() * normal;
+    writeMeshAtomically(aligned_mesh_path, aligned);
+    std::vector<Eigen::Vector3f> sensor_positions;
+    for (const Eigen::Isometry3d& pose : associated.ground_truth) sensor_positions.push_back(pose.translation().cast<float>());
+    comparison.surface = evaluateMeshFileWithinRange(aligned_mesh_path, recording.ground_truth.surface, voxel_m,
+                                                     sensor_positions, range_m);
+    comparison.has_surface = true;
+  }
+  return comparison;
+}
+
+Json::Value statisticsJson(std::vector<double> values) {
+  Json::Value json;
+  if (values.empty()) return json;
+  double sum = 0;
+  for (double value : values) sum += value;
+  json["mean"] = sum / double(values.size());
+  json["median"] = median(values);
+  json["max"] = *std::max_element(values.begin(), values.end());
+  json["min"] = *std::min_element(values.begin(), values.end());
+  return json;
+}
+
+int runPipeline(RunCommandOptions options, const CLI::App& command) {
+  const auto started = Clock::now();
+  const fs::path out(options.output_directory);
+  fs::create_directories(out);
+  const std::vector<std::string> presets = simulationPresetNames();
+  const bool preset = std::find(presets.begin(), presets.end(), options.recording.input) != presets.end() &&
+                      !fs::exists(options.recording.input);
+  std::string environment = options.environment;
+  if (preset) {
+    const std::string name = options.recording.input;
+    if (environment.empty()) environment = isIndoorPreset(name) ? "indoor" : "outdoor";
+    const fs::path sequence = out / "sequence";
+    std::cerr << "simulating " << name << " into " << sequence.string() << "\n";
+    simulatePreset(name, sequence.string(), options.recording.frames);
+    options.recording.input = sequence.string();
+  }
+  applyEnvironment(environment.empty() ? "outdoor" : environment, command, options);
+  mapping::TsdfMap map(options.map);  // bad mapping options fail before any reading
+  registration::LidarOdometry odometry(options.odometry.options());
+  const io::Recording recording = io::openRecording(options.recording);
+
+  OdometryFramesCsv frames_file((out / "odometry_frames.csv").string());
+  std::vector<io::StampedPose> poses;
+  std::vector<FrameRecord> records;
+  std::vector<double> mesh_update_ms;
+  double read_seconds = 0, odometry_seconds = 0, integrate_seconds = 0, mesh_seconds = 0;
+  int frames = 0, degenerate = 0, resets = 0, skipped = 0, refused = 0;
+  std::size_t warnings = 0;
+
+  interrupted = false;
+  const auto previous_handler = std::signal(SIGINT, [](int) { interrupted = true; });
+  std::cerr << "odometry and mapping over " << recording.description << " (" << environment << ": voxel "
+            << options.map.grid.voxel_size_m << " m, range clip " << options.map.integrator.max_range_m
+            << " m); Ctrl-C stops and saves\n";
+  const auto loop_started = Clock::now();
+  auto read_started = Clock::now();
+  io::forEachScan(recording, [&](const RangeImage& scan) {
+    read_seconds += secondsSince(read_started);
+    FrameRecord record;
+    const registration::OdometryUpdate update = odometry.process(scan);
+    frames_file.add(frames, update);
+    record.odometry_ms = update.seconds * 1e3;
+    record.inliers = update.inliers;
+    record.time_s = double(update.stamp_ns) * 1e-9;
+    odometry_seconds += update.seconds;
+    degenerate += update.degenerate;
+    resets += update.reset && frames > 0;
+    skipped += update.skipped;
+    if (!update.warning.empty() && warnings++ < 20)
+      std::cerr << "\nwarning: frame " << frames << ": " << update.warning << "\n";
+    if (!update.skipped) {
+      poses.push_back({record.time_s, update.pose});
+      mapping::ScanPose pose;
+      pose.world_from_lidar = update.pose;
+      if (options.odometry.options().deskew) pose.twist << update.angular_velocity, update.linear_velocity;
+      const auto integrate_started = Clock::now();
+      const mapping::MapUpdate map_update = map.integrate(scan, pose);
+      record.integrate_ms = 1e3 * secondsSince(integrate_started);
+      integrate_seconds += record.integrate_ms * 1e-3;
+      refused += !map_update.integrated;
+      if (!map_update.warning.empty() && warnings++ < 20)
+        std::cerr << "\nwarning: frame " << frames << ": " << map_update.warning << "\n";
+      records.push_back(record);
+    }
+    ++frames;
+    if (frames % options.mesh_every == 0) {
+      const mapping::MeshUpdate mesh_update = map.updateMesh();
+      mesh_update_ms.push_back(1e3 * mesh_update.seconds);
+      mesh_seconds += mesh_update.seconds;
+    }
+    showProgress(frames, recording.expected_frames, loop_started);
+    read_started = Clock::now();
+    return !interrupted;
+  });
+  std::signal(SIGINT, previous_handler);
+  if (recording.expected_frames <= 0 || frames != recording.expected_frames) finishProgress();
+  frames_file.close();
+  if (interrupted) std::cerr << "interrupted after " << frames << " scans: saving what there is\n";
+  if (poses.empty()) throw std::runtime_error("no usable scans in " + recording.input);
+
+  const auto mesh_started = Clock::now();
+  const mapping::TriangleMeshData mesh = map.fullMesh();
+  mesh_seconds += secondsSince(mesh_started);
+  const std::string mesh_path = (out / "mesh.ply").string();
+  writeMeshAtomically(mesh_path, mesh);
+  const std::string trajectory_path = (out / "trajectory.txt").string();
+  const std::string tum_path = writeTrajectory(trajectory_path, poses, recording, options.sensor_frame,
+                                               "rim run " + recording.input);
+  const mapping::MapStatistics statistics = map.statistics();
+
+  Json::Value report;
+  report["input"] = recording.input;
+  report["description"] = recording.description;
+  report["environment"] = environment;
+  report["interrupted"] = bool(interrupted);
+  report["frames"] = frames;
+  report["poses"] = Json::UInt64(poses.size());
+  report["odometry"] = options.odometry.json();
+  report["odometry"]["degenerate"] = degenerate;
+  report["odometry"]["resets"] = resets;
+  report["odometry"]["skipped"] = skipped;
+  report["mapping"] = mapOptionsJson(options.map, options.odometry.options().deskew);
+  report["mapping"]["scans_refused"] = refused;
+  report["mapping"]["blocks"] = Json::UInt64(statistics.blocks);
+  report["mapping"]["memory_bytes"] = Json::UInt64(statistics.memory_bytes);
+  report["mapping"]["vertices"] = Json::UInt64(mesh.vertices.size());
+  report["mapping"]["triangles"] = Json::UInt64(mesh.triangles.size());
+  std::vector<double> odometry_ms, integrate_ms, inliers;
+  for (const FrameRecord& record : records) {
+    odometry_ms.push_back(record.odometry_ms);
+    integrate_ms.push_back(record.integrate_ms);
+    inliers.push_back(double(record.inliers));
+  }
+  Json::Value& timing = report["timing"];
+  timing["read_seconds"] = read_seconds;
+  timing["odometry_seconds"] = odometry_seconds;
+  timing["integrate_seconds"] = integrate_seconds;
+  timing["mesh_seconds"] = mesh_seconds;
+  timing["odometry_ms"] = statisticsJson(odometry_ms);
+  timing["integrate_ms"] = statisticsJson(integrate_ms);
+  timing["mesh_update_ms"] = statisticsJson(mesh_update_ms);
+  timing["odometry_frames_per_second"] = odometry_seconds > 0 ? double(frames) / odometry_seconds : 0.0;
+  timing["mapping_frames_per_second"] = integrate_seconds > 0 ? double(records.size()) / integrate_seconds : 0.0;
+  report["inliers"] = statisticsJson(inliers);
+  report["peak_resident_megabytes"] = peakResidentMegabytes();
+  report["outputs"]["mesh"] = mesh_path;
+  report["outputs"]["trajectory_kitti"] = trajectory_path;
+  report["outputs"]["trajectory_tum"] = tum_path;
+  report["outputs"]["odometry_frames"] = (out / "odometry_frames.csv").string();
+
+  std::optional<GroundTruthComparison> comparison;
+  if (!recording.ground_truth.poses.empty()) {
+    comparison = compareWithGroundTruth(recording, poses, mesh, options.map.grid.voxel_size_m,
+                                        options.map.integrator.max_range_m,
+                                        (out / "mesh_in_ground_truth_frame.ply").string());
+    const evaluation::TrajectoryEvaluation& trajectory = comparison->trajectory;
+    report["ground_truth"]["ate_rmse_m"] = trajectory.absolute_translation_m.rmse;
+    report["ground_truth"]["ate_max_m"] = trajectory.absolute_translation_m.maximum;
+    if (trajectory.kitti.segments > 0) {
+      report["ground_truth"]["rpe_translation_percent"] = trajectory.kitti.translation_percent;
+      report["ground_truth"]["rpe_rotation_deg_per_100m"] = 100.0 * trajectory.kitti.rotation_deg_per_m;
+    }
+    report["ground_truth"]["trajectory_summary"] = evaluation::trajectorySummaryLine(trajectory);
+    if (comparison->has_surface) report["ground_truth"]["surface"] = comparison->surface.json;
+  }
+  report["wall_seconds"] = secondsSince(started);
+
+  std::string plot_note;
+  if (!options.no_plot) {
+    evaluation::RunPlotData plot;
+    for (const io::StampedPose& pose : poses) plot.estimate.push_back(pose.pose);
+    if (comparison) {
+      plot.estimate = comparison->trajectory.aligned_estimate;
+      plot.ground_truth = comparison->trajectory.ground_truth;
+      plot.position_errors_m = comparison->trajectory.position_errors_m;
+    }
+    plot.odometry_ms = odometry_ms;
+    plot.integrate_ms = integrate_ms;
+    try {
+      evaluation::plotRunReport(plot, (out / "report.png").string());
+      report["outputs"]["report_png"] = (out / "report.png").string();
+    } catch (const evaluation::PlotError& error) {
+      plot_note = std::string("no report.png: ") + error.what();
+    }
+  }
+  writeJsonFile((out / "report.json").string(), report);
+
+  std::cout << frames << " scans (" << poses.size() << " poses, " << degenerate << " degenerate, " << resets
+            << " resets, " << skipped << " skipped, " << refused << " refused by the map)\n"
+            << "odometry " << timing["odometry_frames_per_second"].asDouble() << " frames/s ("
+            << timing["odometry_ms"]["median"].asDouble() << " ms median), mapping "
+            << timing["mapping_frames_per_second"].asDouble() << " frames/s ("
+            << timing["integrate_ms"]["median"].asDouble() << " ms median)\n";
+  if (comparison) {
+    std::cout << "ATE " << comparison->trajectory.absolute_translation_m.rmse << " m against the ground truth";
+    if (comparison->trajectory.kitti.segments > 0)
+      std::cout << "; RPE " << comparison->trajectory.kitti.translation_percent << " %, "
+                << 100.0 * comparison->trajectory.kitti.rotation_deg_per_m << " deg/100 m";
+    std::cout << "\n";
+    if (comparison->has_surface) std::cout << "mesh: " << comparison->surface.summary_line << "\n";
+  }
+  std::cout << "mesh " << mesh_path << " (" << mesh.triangles.size() << " triangles, "
+            << double(statistics.memory_bytes) / (1 << 20) << " MiB of voxels); report "
+            << (out / "report.json").string();
+  if (report["outputs"].isMember("report_png")) std::cout << " and " << (out / "report.png").string();
+  std::cout << "; trajectory " << trajectory_path << "\n";
+  if (!plot_note.empty()) std::cerr << plot_note << "\n";
+  return 0;
+}
+
+}  // namespace
+
+void addRunCommand(CLI::App& app) {
+  auto options = std::make_shared<RunCommandOptions>();
+  CLI::App* command = app.add_subcommand(
+      "run",
+      "Odometry and TSDF mapping over a recording or a simulated preset, with no ROS master: trajectory "
+      "(KITTI, TUM), mesh.ply, report.json and report.png in --out; against ground truth when there is some");
+  std::string preset_names;
+  for (const std::string& name : simulationPresetNames()) preset_names += (preset_names.empty() ? "" : ", ") + name;
+  command->add_option("input", options->recording.input,
+                      "a folder from rim simulate, an Ouster pcap (with --metadata), a KITTI velodyne folder, or a "
+                      "preset to simulate first (" + preset_names + ")")
+      ->required();
+  command->add_option("--out,-o", options->output_directory, "output folder")->required();
+  command->add_option("--metadata", options->recording.metadata, "Ouster metadata JSON of the pcap")
+      ->check(CLI::ExistingFile);
+  command->add_flag("--kitti", options->recording.kitti, "INPUT is a KITTI velodyne folder (synthetic HDL-64E model)");
+  command->add_option("--frames", options->recording.frames, "process only the first N scans (a preset: simulate N)")
+      ->check(CLI::PositiveNumber);
+  command->add_option("--environment", options->environment,
+                      "indoor (4 cm voxels, 10 m clip, kernel 0.2 m) or outdoor (10 cm, 30 m, 0.5 m); default: "
+                      "the preset's, else outdoor")
+      ->check(CLI::IsMember({"indoor", "outdoor"}));
+  command->add_flag("--sensor-frame", options->sensor_frame, "write poses of the Ouster sensor frame");
+  command->add_option("--mesh-every", options->mesh_every, "update the mesh after every N scans")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  command->add_flag("--no-plot", options->no_plot, "do not draw report.png");
+  addOdometryOptions(command, options->odometry);
+  addMapOptions(command, options->map);
+  command->callback([options, command] { runPipeline(*options, *command); });
+}
+
+}  // namespace range_image_mapping::tool
