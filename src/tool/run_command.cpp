@@ -132,17 +132,17 @@ int runPipeline(RunCommandOptions options, const CLI::App& command) {
   const bool preset = std::find(presets.begin(), presets.end(), options.recording.input) != presets.end() &&
                       !fs::exists(options.recording.input);
   std::string environment = options.environment;
+  if (preset && environment.empty()) environment = isIndoorPreset(options.recording.input) ? "indoor" : "outdoor";
+  if (environment.empty()) environment = "outdoor";
+  applyEnvironment(environment, command, options);
+  mapping::TsdfMap map(options.map);  // bad mapping options fail before any work
+  registration::LidarOdometry odometry(options.odometry.options());
   if (preset) {
-    const std::string name = options.recording.input;
-    if (environment.empty()) environment = isIndoorPreset(name) ? "indoor" : "outdoor";
     const fs::path sequence = out / "sequence";
-    std::cerr << "simulating " << name << " into " << sequence.string() << "\n";
-    simulatePreset(name, sequence.string(), options.recording.frames);
+    std::cerr << "simulating " << options.recording.input << " into " << sequence.string() << "\n";
+    simulatePreset(options.recording.input, sequence.string(), options.recording.frames);
     options.recording.input = sequence.string();
   }
-  applyEnvironment(environment.empty() ? "outdoor" : environment, command, options);
-  mapping::TsdfMap map(options.map);  // bad mapping options fail before any reading
-  registration::LidarOdometry odometry(options.odometry.options());
   const io::Recording recording = io::openRecording(options.recording);
 
   OdometryFramesCsv frames_file((out / "odometry_frames.csv").string());
