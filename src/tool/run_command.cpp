@@ -13,6 +13,7 @@
 #include "range_image_mapping/mapping/tsdf_map.h"
 #include "range_image_mapping/registration/lidar_odometry.h"
 
+#include <Eigen/SVD>
 #include <json/json.h>
 #include <sys/resource.h>
 
@@ -38,6 +39,7 @@ struct RunCommandOptions {
   bool sensor_frame = false;
   int mesh_every = 10;  // re-mesh after this many scans (1 s at 10 Hz), as the Mapper's mesh_rate
   bool no_plot = false;
+  bool simulate_bag = false;  // a preset also writes packets.bag, to replay through the launch
   OdometryCommandLine odometry;
   mapping::TsdfMapOptions map;
 };
@@ -75,11 +77,30 @@ struct GroundTruthComparison {
   SurfaceEvaluation surface;
 };
 
+// The rigid motion A that best maps estimated poses onto the ground truth,
+// orientations included: R from the SVD of sum R_truth R_estimate^T, then t
+// from the positions. Unlike a position-only (Umeyama) fit it is determined
+// on a straight path too, where the roll about the path would be free.
+Eigen::Isometry3d poseAlignment(const std::vector<Eigen::Isometry3d>& estimate,
+                                const std::vector<Eigen::Isometry3d>& truth) {
+  Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+  for (std::size_t i = 0; i < estimate.size(); ++i) sum += truth[i].linear() * estimate[i].linear().transpose();
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(sum, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d correction = Eigen::Matrix3d::Identity();
+  correction(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1.0 : 1.0;
+  Eigen::Isometry3d alignment = Eigen::Isometry3d::Identity();
+  alignment.linear() = svd.matrixU() * correction * svd.matrixV().transpose();
+  Eigen::Vector3d offset = Eigen::Vector3d::Zero();
+  for (std::size_t i = 0; i < estimate.size(); ++i)
+    offset += truth[i].translation() - alignment.linear() * estimate[i].translation();
+  alignment.translation() = offset / double(estimate.size());
+  return alignment;
+}
+
 // The estimate against a simulated folder's ground truth: poses associated by
 // time (ATE after SE(3) alignment of the positions, as evo), and the mesh
-// moved into the ground-truth world by the first associated pose pair (the
-// odometry starts there; a position-only alignment leaves the roll about a
-// straight path free), compared with the seen surface within the range clip.
+// moved into the ground-truth world by poseAlignment(), compared with the
+// surface seen within the range clip.
 GroundTruthComparison compareWithGroundTruth(const io::Recording& recording,
                                              const std::vector<io::StampedPose>& estimate,
                                              const mapping::TriangleMeshData& mesh, double voxel_m,
@@ -98,8 +119,7 @@ GroundTruthComparison compareWithGroundTruth(const io::Recording& recording,
   comparison.trajectory = evaluation::evaluateTrajectory(associated.estimate, associated.ground_truth);
   if (!recording.ground_truth.surface.empty() && !mesh.triangles.empty()) {
     mapping::TriangleMeshData aligned = mesh;
-    const Eigen::Isometry3f alignment =
-        (associated.ground_truth.front() * associated.estimate.front().inverse()).cast<float>();
+    const Eigen::Isometry3f alignment = poseAlignment(associated.estimate, associated.ground_truth).cast<float>();
     for (Eigen::Vector3f& vertex : aligned.vertices) vertex = alignment * vertex;
     for (Eigen::Vector3f& normal : aligned.normals) normal = alignment.linear() * normal;
     writeMeshAtomically(aligned_mesh_path, aligned);
@@ -140,7 +160,8 @@ int runPipeline(RunCommandOptions options, const CLI::App& command) {
   if (preset) {
     const fs::path sequence = out / "sequence";
     std::cerr << "simulating " << options.recording.input << " into " << sequence.string() << "\n";
-    simulatePreset(options.recording.input, sequence.string(), options.recording.frames);
+    simulatePreset(options.recording.input, sequence.string(), options.recording.frames,
+                   options.map.integrator.max_range_m, options.simulate_bag ? "bag" : "");
     options.recording.input = sequence.string();
   }
   const io::Recording recording = io::openRecording(options.recording);
@@ -343,6 +364,9 @@ void addRunCommand(CLI::App& app) {
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
   command->add_flag("--no-plot", options->no_plot, "do not draw report.png");
+  command->add_flag("--bag", options->simulate_bag,
+                    "a preset also writes sequence/packets.bag (Ouster packets), to replay through "
+                    "range_image_mapping.launch");
   addOdometryOptions(command, options->odometry);
   addMapOptions(command, options->map);
   command->callback([options, command] { runPipeline(*options, *command); });

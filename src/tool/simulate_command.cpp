@@ -84,6 +84,9 @@ struct SimulateOptions {
   double divergence_rad = 0.0;
   bool no_motion_distortion = false;
   double surface_spacing_m = 0.0;  // 0: 2 cm indoors, 7.5 cm outdoors (a 300 m drive sees ~50000 m2)
+  // Only hits this close count as seen (0: all): the ground truth of a map
+  // clipped at this range.
+  double surface_max_range_m = 0.0;
   double start_time_s = 1.0;
 };
 
@@ -275,7 +278,8 @@ int runSimulate(SimulateOptions options) {
     for (int v = 0; v < model.rows(); ++v)
       for (int u = 0; u < model.columns(); ++u) {
         const float range = scan.true_range[static_cast<std::size_t>(v) * model.columns() + u];
-        if (std::isfinite(range)) seen.addHit((scan.column_poses[u] * model.unproject(u, v, range).cast<double>()).cast<float>());
+        if (std::isfinite(range) && !(options.surface_max_range_m > 0.0 && range > options.surface_max_range_m))
+          seen.addHit((scan.column_poses[u] * model.unproject(u, v, range).cast<double>()).cast<float>());
       }
     if (pcap) pcap->writeScan(scan.raw);
 #ifdef RIM_WITH_ROSBAG
@@ -349,8 +353,13 @@ bool isIndoorPreset(const std::string& preset) {
   return false;
 }
 
-void simulatePreset(const std::string& preset, const std::string& directory, int frames) {
+void simulatePreset(const std::string& preset, const std::string& directory, int frames,
+                    double surface_max_range_m, const std::string& extra_format) {
   SimulateOptions options;
+  options.surface_max_range_m = surface_max_range_m;
+  for (const Preset& candidate : kPresets)
+    if (preset == candidate.name)
+      options.formats = std::string(candidate.formats) + (extra_format.empty() ? "" : "," + extra_format);
   options.preset = preset;
   options.output_directory = directory;
   options.frames = frames;
@@ -385,6 +394,10 @@ void addSimulateCommand(CLI::App& app) {
   command->add_option("--surface-spacing", options->surface_spacing_m,
                       "spacing of the ground-truth surface samples, metres (default 0.02 indoors, 0.075 otherwise)")
       ->check(CLI::Range(0.0, 1.0));
+  command->add_option("--surface-max-range", options->surface_max_range_m,
+                      "the ground-truth surface holds only what was seen this close, metres (0: all); e.g. a "
+                      "map's range clip")
+      ->check(CLI::NonNegativeNumber);
   command->callback([options] { runSimulate(*options); });
 }
 
