@@ -17,7 +17,7 @@ export PATH="/usr/bin:/bin:/usr/sbin:/sbin:$PATH"
 
 packages=(
   build-essential cmake pkg-config git
-  catkin ros-core-dev rosbash python3-roslaunch python3-rostest python3-rosbag
+  catkin ros-core-dev rosbash python3-roslaunch python3-rostest python3-rosbag rviz
   libnodeletlib-dev libnodeletlib-tools libnodelet-dev pluginlib-dev libtopic-tools-dev
   libtf2-ros-dev libtf2-eigen-dev libsensor-msgs-dev libnav-msgs-dev libvisualization-msgs-dev
   librostest-dev libgtest-dev libbenchmark-dev
@@ -60,14 +60,18 @@ ros_environment() {
 
 demo() {
   ros_environment
-  local capture="$RIM_DATA_DIR/ouster-pcaps/OS-1-128_v2.3.0_1024x10_lb_n3.pcap"
-  local metadata="$RIM_DATA_DIR/ouster-pcaps/OS-1-128_v2.3.0_1024x10.json"
-  if [ ! -f "$capture" ]; then
-    echo "The demo decodes a real Ouster capture, $capture, which is not on this machine." >&2
-    exit 1
-  fi
-  "$workspace/devel/lib/range_image_mapping/rim" decode "$capture" --metadata "$metadata" \
-    --out "$repository/out/decode"
+  # The main job on data the project makes itself: a short OS0-128 sequence
+  # from the simulator (exact ground truth), odometry and TSDF mapping with
+  # rim run, scored against the truth. --bag also writes the packets for the
+  # rviz replay printed at the end.
+  local out="$repository/out/demo"
+  rm -rf "$out"
+  "$workspace/devel/lib/range_image_mapping/rim" run indoor_cart --frames 100 --bag --out "$out"
+  echo
+  echo "Watch the same data grow into a mesh in rviz:"
+  echo "  source $workspace/devel/setup.bash"
+  echo "  roslaunch range_image_mapping range_image_mapping.launch bag_file:=$out/sequence/packets.bag \\"
+  echo "    config:=\$(rospack find range_image_mapping)/config/os0_128_indoor.yaml rviz:=true"
 }
 
 run_tests() {
