@@ -22,6 +22,7 @@
 #include <functional>
 #include <iterator>
 #include <map>
+#include <limits>
 #include <set>
 #include <string>
 #include <vector>
@@ -33,7 +34,7 @@ using DistanceFunction = std::function<double(const Eigen::Vector3d&)>;
 
 struct FillOptions {
   double truncation_voxels = 3.0;
-  // Voxels where this is false get weight 0.5 (below the default min_weight).
+  // Voxels where this is false get weight 0.5 (below a min_weight of 1).
   std::function<bool(const Eigen::Vector3d&)> observed;
   DistanceFunction intensity;
 };
@@ -337,7 +338,9 @@ TEST(MarchingCubes, MeshEndsWhereObservationsEnd) {
   const VoxelBlockGrid half = sphereGrid(voxel, 8, centre, radius, fill);
   const TriangleMeshData full = extractMesh(sphereGrid(voxel, 8, centre, radius));
   // Voxels beyond the limit have weight 0.5: unobserved for min_weight 1.
-  const TriangleMeshData mesh = extractMesh(half);
+  MeshOptions strict;
+  strict.min_weight = 1.0f;
+  const TriangleMeshData mesh = extractMesh(half, strict);
   const double last_plane = std::floor(limit_z / voxel) * voxel;  // highest observed lattice plane
 
   std::size_t above = 0;
@@ -365,10 +368,12 @@ TEST(MarchingCubes, MeshEndsWhereObservationsEnd) {
     if (std::min({t[0][2], t[1][2], t[2][2]}) < last_plane - 1e-5) missing += !half_set.count(t);
   EXPECT_EQ(missing, 0u);
 
-  // A lower min_weight counts the weight 0.5 voxels as observed.
+  // A lower min_weight counts the weight 0.5 voxels as observed, and so does
+  // the default (every observed voxel, whatever its weight).
   MeshOptions lenient;
   lenient.min_weight = 0.25f;
   EXPECT_TRUE(triangleSet(extractMesh(half, lenient)) == full_set);
+  EXPECT_TRUE(triangleSet(extractMesh(half)) == full_set);
 }
 
 TEST(MarchingCubes, IntensityIsInterpolatedAlongTheEdge) {
@@ -487,6 +492,76 @@ TEST(MeshExtractor, RebuildsChangedBlocksAndTheirLowerNeighboursOnly) {
   EXPECT_EQ(extractor.triangleCount(), 0u);
 }
 
+// With a budget of blocks per update, changed blocks wait oldest first: the
+// first update re-meshes the budget, the rest follow in later updates, a
+// block changed again while it waits is re-meshed once, and the mesh ends
+// equal to a full extraction. force_all re-meshes everything at once.
+TEST(MeshExtractor, BudgetLeavesTheRestForLaterUpdatesOldestFirst) {
+  const Eigen::Vector3d centre(0.123, -0.456, 0.0789);
+  const double voxel = 0.05;
+  VoxelBlockGrid grid = sphereGrid(voxel, 8, centre, 1.0);
+  const std::size_t blocks = grid.blockCount();
+  ASSERT_GT(blocks, 100u);
+  MeshOptions options;
+  options.max_blocks_per_update = 40;
+  MeshExtractor extractor(options);
+
+  MeshUpdate update = extractor.update(grid);
+  EXPECT_EQ(update.changed.size(), 40u);
+  EXPECT_EQ(update.pending, blocks - 40);
+  EXPECT_EQ(extractor.pendingCount(), blocks - 40);
+  // The first 40 in key order (all waited since the same generation).
+  std::vector<BlockKey> all_keys;
+  for (const VoxelBlock* block : grid.blocks()) all_keys.push_back(block->key);
+  all_keys = sortedKeys(all_keys);
+  EXPECT_EQ(update.changed, std::vector<BlockKey>(all_keys.begin(), all_keys.begin() + 40));
+
+  // The sphere grows in every block, and every block is marked again: the
+  // 40 re-meshed ones queue behind those still waiting, which are re-meshed once.
+  const auto refill = [&](double radius) {
+    const uint64_t generation = grid.nextGeneration();
+    const auto distance = sphereDistance(centre, radius);
+    for (VoxelBlock* block : grid.blocks()) {
+      for (int k = 0; k < 8; ++k)
+        for (int j = 0; j < 8; ++j)
+          for (int i = 0; i < 8; ++i)
+            block->sdf[i + 8 * (j + 8 * k)] =
+                float(std::clamp(distance(grid.voxelPosition(block->key, i, j, k)), -3 * voxel, 3 * voxel));
+      block->changed_generation = generation;
+    }
+  };
+  refill(1.0 + 0.3 * voxel);
+  update = extractor.update(grid);
+  EXPECT_EQ(update.changed, std::vector<BlockKey>(all_keys.begin() + 40, all_keys.begin() + 80));
+  std::size_t updates = 2;
+  while (extractor.pendingCount() > 0) {
+    update = extractor.update(grid);
+    EXPECT_LE(update.changed.size(), 40u);
+    ASSERT_LT(++updates, 100u);
+  }
+  // After the first update every block waited once more: the 40 re-meshed
+  // blocks for the second fill, the others for both fills together.
+  EXPECT_EQ(updates, 1 + (blocks + 39) / 40);
+  expectSameMesh(extractor.combined(), extractMesh(grid));
+
+  // force_all: everything at once, budget or not.
+  refill(1.0 - 0.2 * voxel);
+  update = extractor.update(grid, /*force_all=*/true);
+  EXPECT_EQ(update.changed.size(), blocks);
+  EXPECT_EQ(update.pending, 0u);
+  expectSameMesh(extractor.combined(), extractMesh(grid));
+
+  // A time budget stops between batches: a budget far below one block's
+  // time still re-meshes one batch, and never everything at once.
+  MeshOptions timed;
+  timed.update_budget_s = 1e-9;
+  MeshExtractor budgeted(timed);
+  update = budgeted.update(grid);
+  EXPECT_GT(update.changed.size(), 0u);
+  EXPECT_LT(update.changed.size(), blocks);
+  EXPECT_EQ(update.pending, blocks - update.changed.size());
+}
+
 TEST(MeshExtractor, SpeedOnAMillionVoxelsWithTwoThreads) {
   tbb::global_control threads(tbb::global_control::max_allowed_parallelism, 2);
   const Eigen::Vector3d centre(0.31, -0.17, 0.05);
@@ -560,6 +635,12 @@ TEST(MarchingCubes, BadInputIsRefusedWithAClearError) {
   MeshOptions negative;
   negative.min_weight = -1.0f;
   EXPECT_THROW(MeshExtractor{negative}, MappingError);
+  MeshOptions negative_budget;
+  negative_budget.update_budget_s = -0.01;
+  EXPECT_THROW(MeshExtractor{negative_budget}, MappingError);
+  MeshOptions infinite_budget;
+  infinite_budget.update_budget_s = std::numeric_limits<double>::infinity();
+  EXPECT_THROW(MeshExtractor{infinite_budget}, MappingError);
   MeshOptions not_a_number;
   not_a_number.min_weight = std::nanf("");
   VoxelBlockGrid grid = sphereGrid(0.1, 8, {0.0, 0.0, 0.0}, 0.5);

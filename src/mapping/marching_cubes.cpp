@@ -126,6 +126,7 @@ class BlockMesher {
                      [&](float weight) { return weight > 0.0f && weight >= options.min_weight; }))
       return false;
     bool has_negative = false, has_positive = false;
+    const float min_weight = options.min_weight;
     for (int neighbour = 0; neighbour < 8; ++neighbour) {
       const Eigen::Vector3i offset(neighbour & 1, (neighbour >> 1) & 1, neighbour >> 2);
       const VoxelBlock* source = neighbour == 0 ? &block : grid.find(block.key + offset);
@@ -133,24 +134,33 @@ class BlockMesher {
       const Eigen::Vector3i begin = offset * edge_;
       Eigen::Vector3i end;
       for (int axis = 0; axis < 3; ++axis) end[axis] = offset[axis] == 0 ? edge_ : padded_;
+      const int run = end.x() - begin.x();
+      // Raw pointers, one x run at a time: the compiler cannot tell the
+      // stores below from the vectors' own members otherwise.
+      uint8_t* const observed = observed_.data();
+      float* const sdf_out = sdf_.data();
+      float* const intensity_out = with_intensity_ ? intensity_.data() : nullptr;
+      const float* const sdf_in = source ? source->sdf.data() : nullptr;
+      const float* const weight_in = source ? source->weight.data() : nullptr;
+      const float* const intensity_in = source && with_intensity_ ? source->intensity.data() : nullptr;
       for (int z = begin.z(); z < end.z(); ++z)
-        for (int y = begin.y(); y < end.y(); ++y)
-          for (int x = begin.x(); x < end.x(); ++x) {
-            const int target = paddedIndex(x, y, z);
-            if (!source) {
-              observed_[target] = 0;
-              continue;
-            }
-            const int voxel = (x - begin.x()) + edge_ * ((y - begin.y()) + edge_ * (z - begin.z()));
-            const float sdf = source->sdf[voxel], weight = source->weight[voxel];
-            const bool observed =
-                weight > 0.0f && weight >= options.min_weight && std::isfinite(sdf);
-            observed_[target] = observed;
-            sdf_[target] = sdf;
-            if (with_intensity_) intensity_[target] = source->intensity[voxel];
-            has_negative = has_negative || (observed && sdf < 0.0f);
-            has_positive = has_positive || (observed && sdf >= 0.0f);
+        for (int y = begin.y(); y < end.y(); ++y) {
+          const int target = paddedIndex(begin.x(), y, z);
+          if (!source) {
+            std::fill(observed + target, observed + target + run, uint8_t(0));
+            continue;
           }
+          const int voxel = edge_ * ((y - begin.y()) + edge_ * (z - begin.z()));
+          for (int x = 0; x < run; ++x) {
+            const float sdf = sdf_in[voxel + x], weight = weight_in[voxel + x];
+            const bool is_observed = weight > 0.0f && weight >= min_weight && std::isfinite(sdf);
+            observed[target + x] = is_observed;
+            sdf_out[target + x] = sdf;
+            has_negative = has_negative || (is_observed && sdf < 0.0f);
+            has_positive = has_positive || (is_observed && sdf >= 0.0f);
+          }
+          if (intensity_out) std::copy(intensity_in + voxel, intensity_in + voxel + run, intensity_out + target);
+        }
     }
     return has_negative && has_positive;
   }
@@ -335,6 +345,9 @@ void MeshOptions::validate() const {
   if (!std::isfinite(min_weight) || min_weight < 0.0f)
     throw MappingError("MeshOptions: min_weight must be finite and >= 0, got " +
                        numberText(min_weight));
+  if (!std::isfinite(update_budget_s) || update_budget_s < 0.0)
+    throw MappingError("MeshOptions: update_budget_s must be finite and >= 0 (0 = no limit), got " +
+                       numberText(update_budget_s));
 }
 
 MeshChunk meshBlock(const VoxelBlockGrid& grid, const VoxelBlock& block, const MeshOptions& options) {
@@ -393,11 +406,24 @@ void writeMeshPly(const std::string& path, const TriangleMeshData& mesh) {
 
 // ---------------------------------------------------------------- MeshExtractor
 
+namespace {
+
+// Blocks re-meshed between two looks at the clock under a time budget:
+// enough for both threads to stay busy, few enough to overshoot little.
+constexpr std::size_t kBlocksPerBudgetBatch = 64;
+
+}  // namespace
+
 struct MeshExtractor::State {
   tsl::robin_map<BlockKey, MeshChunk, BlockKeyHash> chunks;  // only blocks with triangles
   // Every block of the grid at the last update: a block that is gone
   // changes the border cubes of its lower neighbours even if it had no chunk.
   tsl::robin_set<BlockKey, BlockKeyHash> known_blocks;
+  // Blocks to re-mesh, with the grid generation at which they first waited.
+  tsl::robin_map<BlockKey, uint64_t, BlockKeyHash> pending;
+  // Chunks dropped with their blocks, reported by the next update that
+  // completes (one that throws reports nothing).
+  std::vector<BlockKey> unreported_removals;
   tbb::enumerable_thread_specific<BlockMesher> meshers;
 };
 
@@ -406,55 +432,86 @@ MeshExtractor::MeshExtractor(MeshOptions options)
   options_.validate();
 }
 
-MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid) {
+MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
   const auto start = std::chrono::steady_clock::now();
   MeshUpdate result;
   State& state = *state_;
-  const bool remesh_all = grid.generation() < meshed_generation_;
+  const bool remesh_all = force_all || grid.generation() < meshed_generation_;
+  const uint64_t generation = grid.generation();
 
-  // Blocks whose cubes read a changed block: itself and the 7 lower neighbours.
-  tsl::robin_set<BlockKey, BlockKeyHash> dirty;
+  // Blocks whose cubes read a changed block: itself and the 7 lower
+  // neighbours. A block already waiting keeps its place in the queue.
   const auto markWithLowerNeighbours = [&](const BlockKey& key) {
     for (int neighbour = 0; neighbour < 8; ++neighbour) {
       const BlockKey lower = key - Eigen::Vector3i(neighbour & 1, (neighbour >> 1) & 1, neighbour >> 2);
-      if (grid.find(lower)) dirty.insert(lower);
+      if (grid.find(lower)) state.pending.try_emplace(lower, generation);
     }
   };
+  // A reset or replaced grid: what waits refers to blocks that may be gone.
+  if (grid.generation() < meshed_generation_) state.pending.clear();
   std::vector<BlockKey> gone;
   for (const BlockKey& key : state.known_blocks)
-    if (!grid.find(key)) {
-      gone.push_back(key);
-      markWithLowerNeighbours(key);
-    }
+    if (!grid.find(key)) gone.push_back(key);
+  for (const BlockKey& key : gone) {
+    state.known_blocks.erase(key);
+    state.pending.erase(key);
+    if (state.chunks.erase(key)) state.unreported_removals.push_back(key);
+    markWithLowerNeighbours(key);
+  }
   const std::vector<const VoxelBlock*> blocks = grid.blocks();
-  for (const VoxelBlock* block : blocks)
-    if (remesh_all || block->changed_generation > meshed_generation_ ||
-        !state.known_blocks.count(block->key))
-      markWithLowerNeighbours(block->key);
-  result.changed.assign(dirty.begin(), dirty.end());
-  std::sort(result.changed.begin(), result.changed.end(), keyLess);
+  for (const VoxelBlock* block : blocks) {
+    const bool is_new = state.known_blocks.insert(block->key).second;
+    if (remesh_all || is_new || block->changed_generation > meshed_generation_) markWithLowerNeighbours(block->key);
+  }
 
-  // Meshing may throw (a malformed block): nothing is changed before it is done.
-  std::vector<MeshChunk> rebuilt(result.changed.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rebuilt.size(), 4),
-                    [&](const tbb::blocked_range<std::size_t>& range) {
-                      BlockMesher& mesher = state.meshers.local();
-                      for (std::size_t i = range.begin(); i != range.end(); ++i)
-                        rebuilt[i] = mesher.mesh(grid, *grid.find(result.changed[i]), options_);
-                    });
+  // Oldest first (then by key, so that the order does not depend on the
+  // hash), as many as the budget allows.
+  std::vector<std::pair<uint64_t, BlockKey>> queue;
+  queue.reserve(state.pending.size());
+  for (const auto& [key, since] : state.pending) queue.emplace_back(since, key);
+  const bool budgeted = !remesh_all && (options_.update_budget_s > 0.0 || options_.max_blocks_per_update > 0);
+  if (budgeted)
+    std::sort(queue.begin(), queue.end(), [](const auto& a, const auto& b) {
+      return a.first != b.first ? a.first < b.first : keyLess(a.second, b.second);
+    });
+  std::size_t take = queue.size();
+  if (budgeted && options_.max_blocks_per_update > 0) take = std::min(take, options_.max_blocks_per_update);
 
-  for (const BlockKey& key : gone)
-    if (state.chunks.erase(key)) result.removed.push_back(key);
+  // Meshing may throw (a malformed block): no chunk is replaced before it is
+  // done, and what waited still waits.
+  std::vector<MeshChunk> rebuilt;
+  rebuilt.reserve(take);
+  std::size_t done = 0;
+  while (done < take) {
+    std::size_t batch = take - done;
+    if (budgeted && options_.update_budget_s > 0.0) {
+      if (done > 0 && secondsSince(start) >= options_.update_budget_s) break;
+      batch = std::min(batch, kBlocksPerBudgetBatch);
+    }
+    rebuilt.resize(done + batch);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(done, done + batch, 4),
+                      [&](const tbb::blocked_range<std::size_t>& range) {
+                        BlockMesher& mesher = state.meshers.local();
+                        for (std::size_t i = range.begin(); i != range.end(); ++i)
+                          rebuilt[i] = mesher.mesh(grid, *grid.find(queue[i].second), options_);
+                      });
+    done += batch;
+  }
+
+  result.removed.swap(state.unreported_removals);
   std::sort(result.removed.begin(), result.removed.end(), keyLess);
+  result.changed.reserve(rebuilt.size());
   for (MeshChunk& chunk : rebuilt) {
+    state.pending.erase(chunk.key);
+    result.changed.push_back(chunk.key);
     if (chunk.triangles.empty())
       state.chunks.erase(chunk.key);
     else
       state.chunks[chunk.key] = std::move(chunk);
   }
-  state.known_blocks.clear();
-  for (const VoxelBlock* block : blocks) state.known_blocks.insert(block->key);
-  meshed_generation_ = grid.generation();
+  std::sort(result.changed.begin(), result.changed.end(), keyLess);
+  result.pending = state.pending.size();
+  meshed_generation_ = generation;
   result.seconds = secondsSince(start);
   return result;
 }
@@ -481,9 +538,13 @@ std::size_t MeshExtractor::triangleCount() const {
 
 TriangleMeshData MeshExtractor::combined() const { return weldChunks(chunks()); }
 
+std::size_t MeshExtractor::pendingCount() const { return state_->pending.size(); }
+
 void MeshExtractor::clear() {
   state_->chunks.clear();
   state_->known_blocks.clear();
+  state_->pending.clear();
+  state_->unreported_removals.clear();
   meshed_generation_ = 0;
 }
 

@@ -111,9 +111,8 @@ struct PerColumnMotion {
 template <typename Motion>
 NormalEquations accumulate(const std::vector<Eigen::Vector3f>& points, const std::vector<Eigen::Vector3f>& normals,
                            const std::vector<int>& columns, const Motion& motion, const LidarModel& target_model,
-                           const VertexNormalMap& target, const RegistrationOptions& options) {
-  const float max_distance_squared =
-      float(options.max_correspondence_distance_m * options.max_correspondence_distance_m);
+                           const VertexNormalMap& target, const RegistrationOptions& options, double gate_m) {
+  const float max_distance_squared = float(gate_m * gate_m);
   const float min_cosine = float(options.min_normal_cosine);
   const KernelWeight weight_of(options.kernel);
 
@@ -344,12 +343,18 @@ RegistrationResult ProjectiveIcp::alignSource(const Eigen::Isometry3d& initial_t
     const double looseness = finest ? 1.0 : options_.coarse_convergence_scale * options_.strides[level];
     const int iterations = schedule.max_iterations > 0 ? std::min(schedule.max_iterations, options_.iterations[level])
                                                        : options_.iterations[level];
+    // Pairs further apart than the gate are not the same surface: at full
+    // resolution that is max_correspondence_distance_m; a coarse level has
+    // to capture the motion the finer ones cannot, and its pixels are s
+    // times as far apart, so it accepts s times as far.
+    const double gate_m = options_.max_correspondence_distance_m *
+                          (options_.gate_grows_with_stride ? double(options_.strides[level]) : 1.0);
     for (int iteration = 0; iteration < iterations; ++iteration) {
       const Eigen::Matrix3f rotation = result.target_from_source.linear().cast<float>();
       const Eigen::Vector3f translation = result.target_from_source.translation().cast<float>();
       if (column_motion.empty()) {
         last = accumulate(source.points, source.normals, source.columns, RigidMotion{rotation, translation},
-                          *target_model_, target_levels_[level], options_);
+                          *target_model_, target_levels_[level], options_, gate_m);
       } else {
         column_transforms_.resize(column_motion.size());
         for (std::size_t u = 0; u < column_motion.size(); ++u) {
@@ -357,7 +362,7 @@ RegistrationResult ProjectiveIcp::alignSource(const Eigen::Isometry3d& initial_t
           column_transforms_[u].col(3) = rotation * column_motion[u].col(3) + translation;
         }
         last = accumulate(source.points, source.normals, source.columns, PerColumnMotion{column_transforms_.data()},
-                          *target_model_, target_levels_[level], options_);
+                          *target_model_, target_levels_[level], options_, gate_m);
       }
       ++result.iterations;
       if (last.inliers < 6) break;  // nothing to solve for; the pose stays

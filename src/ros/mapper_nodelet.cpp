@@ -329,8 +329,11 @@ void MapperNodelet::onInit() {
   diagnostics_ = std::make_unique<diagnostic_updater::Updater>(node, private_node, getName());
   diagnostics_->setHardwareID("tsdf_mapper");
   diagnostics_->add("mapping", this, &MapperNodelet::diagnose);
+  // force_update: the updater's own period runs on ROS time, which stops
+  // with a paused replay and, after a bag loop, would hold diagnostics back
+  // for as long as the jump; this timer runs on wall time.
   diagnostics_timer_ = node.createSteadyTimer(ros::WallDuration(1.0),
-                                              [this](const ros::SteadyTimerEvent&) { diagnostics_->update(); });
+                                              [this](const ros::SteadyTimerEvent&) { diagnostics_->force_update(); });
   statistics_timer_ = node.createSteadyTimer(ros::WallDuration(parameters_.statistics_period_s),
                                              &MapperNodelet::onStatisticsTimer, this);
   log_window_.advance(statistics_);  // the first windows start now

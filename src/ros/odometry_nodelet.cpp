@@ -173,6 +173,11 @@ class OdometryNodelet : public nodelet::Nodelet {
   std::optional<Eigen::Isometry3d> base_from_lidar_;
   ros::SteadyTime lidar_transform_wait_started_;
 
+  // ROS time at the previous scan, and whether it has gone back since the
+  // last scan that belonged to the new time (a bag loop).
+  ros::Time last_ros_time_;
+  bool ros_time_jumped_back_ = false;
+
   std::deque<geometry_msgs::PoseStamped> path_;
   ros::Time last_published_stamp_;
   std::optional<uint32_t> last_frame_counter_;
@@ -206,8 +211,11 @@ void OdometryNodelet::onInit() {
   diagnostics_ = std::make_unique<diagnostic_updater::Updater>(node, getPrivateNodeHandle(), getName());
   diagnostics_->setHardwareID("lidar_odometry");
   diagnostics_->add("odometry", this, &OdometryNodelet::diagnose);
+  // force_update: the updater's own period runs on ROS time, which stops
+  // with a paused replay and, after a bag loop, would hold diagnostics back
+  // for as long as the jump; this timer runs on wall time.
   diagnostics_timer_ = node.createSteadyTimer(ros::WallDuration(1.0),
-                                              [this](const ros::SteadyTimerEvent&) { diagnostics_->update(); });
+                                              [this](const ros::SteadyTimerEvent&) { diagnostics_->force_update(); });
   statistics_timer_ = node.createSteadyTimer(ros::WallDuration(parameters_.statistics_period_s),
                                              &OdometryNodelet::onStatisticsTimer, this);
 
@@ -240,7 +248,26 @@ void OdometryNodelet::onRangeImage(const LidarRangeImage::ConstPtr& message) {
                     [](uint64_t t) { return t != 0; }))
       image.stamp_ns = 0;
 
-    const registration::OdometryUpdate update = odometry_->process(image);
+    // ROS time going back (a bag loop, a restarted replay) restarts the data.
+    // The core restarts from the pose it has reached, right for a sensor clock
+    // that jumped but wrong for a replay that starts over: its scans would be
+    // posed, and mapped, from the end of the first pass. So the odometry
+    // starts over at the identity, as the first time.
+    const ros::Time now = ros::Time::now();
+    if (!last_ros_time_.isZero() && now < last_ros_time_) ros_time_jumped_back_ = true;
+    last_ros_time_ = now;
+    registration::OdometryUpdate update = odometry_->process(image);
+    if (ros_time_jumped_back_ && update.reset && last_update_.stamp_ns != 0 &&
+        update.stamp_ns < last_update_.stamp_ns) {
+      ros_time_jumped_back_ = false;
+      const std::string scan_time = update.warning.substr(0, update.warning.find(':'));  // "time went back by ..."
+      odometry_->reset();
+      update = odometry_->process(image);
+      update.warning = "ROS time jumped back (a bag loop or a restarted replay) and the scan " + scan_time +
+                       ": odometry restarted at the identity";
+    } else if (ros_time_jumped_back_ && message->header.stamp <= now) {
+      ros_time_jumped_back_ = false;  // a scan of the new time that continues the data: no restart
+    }
     ++statistics_.frames;
     statistics_.seconds += update.seconds;
     if (update.skipped) ++statistics_.skipped;

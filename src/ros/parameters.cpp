@@ -295,6 +295,7 @@ MapperParameters readMapperParameters(const ros::NodeHandle& private_node) {
   map.mesh.min_weight =
       static_cast<float>(reader.getDouble("mesh_min_weight", defaults.map.mesh.min_weight, -kAny, kAny));
   map.memory_radius_m = reader.getDouble("memory_radius", defaults.map.memory_radius_m, -kAny, kAny);
+  map.keep_dropped_mesh = reader.getBool("keep_dropped_mesh", defaults.map.keep_dropped_mesh);
   map.max_pose_jump_m = reader.getDouble("max_pose_jump", defaults.map.max_pose_jump_m, -kAny, kAny);
   map.max_refused_jumps = reader.getInt("max_refused_jumps", defaults.map.max_refused_jumps, -kAnyInt, kAnyInt);
 

@@ -6,7 +6,8 @@
 // generated from the cube's topology, src/mapping/marching_cubes_cases.h).
 // Incremental: a MeshExtractor re-meshes only the blocks changed
 // since its last update (and their -1 neighbours, whose border cubes read
-// them), keeping one mesh chunk per block.
+// them), keeping one mesh chunk per block, optionally within a time budget
+// per update.
 #pragma once
 
 #include "range_image_mapping/mapping/voxel_block_grid.h"
@@ -22,12 +23,24 @@
 namespace range_image_mapping::mapping {
 
 struct MeshOptions {
-  // A cube is meshed only if all 8 corners have at least this weight.
-  // Unobserved corners (weight 0, or a non-finite SDF) never produce
-  // triangles, so the mesh ends where observations end instead of closing on
-  // invented surfaces.
-  float min_weight = 1.0f;
-  // Throws MappingError for a negative or non-finite min_weight.
+  // A cube is meshed only if all 8 corners are observed and have at least
+  // this weight. Unobserved corners (weight 0, or a non-finite SDF) never
+  // produce triangles, so the mesh ends where observations end instead of
+  // closing on invented surfaces. Weights count full observations: a sample
+  // weighs 1, less with the integrator's incidence or range weighting (down
+  // to 0.1 for a grazing one), so 0, the default, meshes everything observed
+  // whatever the weighting, and 1 asks for at least one full observation's
+  // worth (TsdfIntegratorOptions::mesh_min_weight must then say the same).
+  float min_weight = 0.0f;
+  // MeshExtractor::update() only: a budget per update, so that a live map's
+  // mesh costs bounded time per scan. Blocks that changed wait in a queue,
+  // oldest change first, and are re-meshed by later updates; a block that
+  // changes again while it waits is re-meshed once. 0 = no limit (every
+  // changed block in every update). The time budget is checked between
+  // batches of blocks, so an update may pass it by one batch.
+  double update_budget_s = 0.0;
+  std::size_t max_blocks_per_update = 0;
+  // Throws MappingError for a negative or non-finite min_weight or budget.
   void validate() const;
 };
 
@@ -94,6 +107,7 @@ void writeMeshPly(const std::string& path, const TriangleMeshData& mesh);
 struct MeshUpdate {
   std::vector<BlockKey> changed;  // chunks rebuilt (possibly now empty)
   std::vector<BlockKey> removed;  // chunks whose block is gone
+  std::size_t pending = 0;        // changed blocks left for later updates by the budget
   double seconds = 0.0;
 };
 
@@ -102,12 +116,15 @@ class MeshExtractor {
  public:
   explicit MeshExtractor(MeshOptions options = {});
   // Re-meshes the blocks changed since the last call (and their lower
-  // neighbours), in parallel. Blocks removed from the grid lose their chunk.
-  // "Changed" means changed_generation above the grid's generation at the
-  // last call, or new since the last call; a grid whose generation went
-  // backwards (reset or replaced) is re-meshed whole. Blocks rebuilt without
-  // triangles keep no chunk.
-  MeshUpdate update(const VoxelBlockGrid& grid);
+  // neighbours), in parallel, within the options' budget (the rest wait).
+  // Blocks removed from the grid lose their chunk. "Changed" means
+  // changed_generation above the grid's generation at the last call, or new
+  // since the last call; a grid whose generation went backwards (reset or
+  // replaced) is re-meshed whole. Blocks rebuilt without triangles keep no
+  // chunk. force_all: re-mesh every block of the grid, whatever the budget
+  // and whatever the integrator left unmarked (TsdfIntegratorOptions::
+  // mesh_tolerance_voxels): combined() then equals extractMesh(grid).
+  MeshUpdate update(const VoxelBlockGrid& grid, bool force_all = false);
   // nullptr when the block has no triangles.
   const MeshChunk* chunk(const BlockKey& key) const;
   // Sorted by key.
@@ -115,6 +132,8 @@ class MeshExtractor {
   std::size_t triangleCount() const;
   // All chunks as one mesh (vertices welded across chunk borders).
   TriangleMeshData combined() const;
+  // Changed blocks waiting for an update (the budget left them out).
+  std::size_t pendingCount() const;
   void clear();
 
  private:

@@ -28,7 +28,11 @@ struct RegistrationOptions {
   std::vector<int> strides{4, 2, 1};        // pyramid levels, coarse to fine
   std::vector<int> iterations{20, 20, 10};  // Gauss-Newton iterations per level (paper)
   int source_stride = 1;                    // extra subsampling of the source at every level
-  double max_correspondence_distance_m = 1.0;
+  double max_correspondence_distance_m = 1.0;  // pairs further apart are rejected (full resolution)
+  // A level of stride s accepts pairs s times as far apart: the coarse
+  // levels capture motions beyond the gate (from an identity guess, scans
+  // metres apart), the fine ones reject outliers.
+  bool gate_grows_with_stride = true;
   double min_normal_cosine = 0.8;           // source and target normals must agree
   RobustKernel kernel;
   NormalMapOptions normals;
@@ -73,9 +77,9 @@ class ProjectiveIcp {
   // for an image without a model or destaggered.
   void setTarget(const RangeImage& target);
   // The same, with the image's full-resolution map already computed (with
-  // these options' normals): levels of stride 1 copy it instead of computing
-  // it again. Throws std::invalid_argument when its size or stride does not
-  // match the image.
+  // these options' normals; its points may have been moved, e.g. deskewed):
+  // levels of stride 1 copy it instead of computing it again. Throws
+  // std::invalid_argument when its size or stride does not match the image.
   void setTarget(const RangeImage& target, const VertexNormalMap& full_resolution);
   bool hasTarget() const { return target_model_ != nullptr; }
   const VertexNormalMap& targetLevel(std::size_t level) const { return target_levels_.at(level); }
