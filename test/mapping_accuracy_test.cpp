@@ -72,33 +72,57 @@ evaluation::SurfaceMetrics issueTargetRun(const test::MappingPreset& preset) {
 }
 
 TEST(MappingAccuracy, IndoorCartMeshReachesTheIssueTarget) {
-  EXPECT_GE(issueTargetRun(test::indoorCartPreset()).f_score, 0.95);
+  EXPECT_GE(issueTargetRun(test::indoorCartPreset()).f_score, 0.98);
 }
 
+// (0.954 with eq. 9 along the ray: recall 0.91, the far ground between beam
+// rings missing; point-to-plane distances: 0.975, recall 0.99.)
 TEST(MappingAccuracy, OutdoorCarMeshReachesTheIssueTarget) {
-  EXPECT_GE(issueTargetRun(test::outdoorCarPreset()).f_score, 0.93);
+  EXPECT_GE(issueTargetRun(test::outdoorCarPreset()).f_score, 0.97);
 }
 
 // OctoMap on the same scans (4 scans, every 5th frame: OctoMap needs ~2 s of
-// one core per scan). Against an exact ground truth restricted to what was
-// seen, occupied-leaf centres score F ~ 0.9999 at the paper's 3 x voxel: each
-// occupied leaf holds a measurement, and 3 voxels hide the half-voxel
-// quantisation of a leaf centre. What sets the TSDF apart is that its zero
-// crossing lies within the voxel: asserted at half a voxel, where OctoMap's
-// quantisation shows; the paper's 3 x voxel and one voxel are printed.
-void expectCloserToTheSurfaceThanOctomap(const test::MappingPreset& preset) {
+// one core per scan), same clip, same resolution, its default sensor model
+// (insertPointCloud, hit 0.7 / miss 0.4); its surface is the centres of its
+// occupied leaves. At the paper's 3 x voxel, against the issue's truth (the
+// scene within a voxel of a hit), OctoMap is near perfect by construction:
+// its occupied leaves are where the hits fell, and so is the truth. The TSDF
+// mesh also covers the surface between beam rings, where no hit fell: its
+// "misses" there are on the scene (precision against every surface near the
+// route, printed too). Finer thresholds show what each map knows of where
+// the surface is: a zero crossing within the voxel, a leaf centre within
+// half a voxel. Asserted: at 3 x voxel recall and precision against the
+// scene; at half a voxel F and the median accuracy beat OctoMap's.
+void compareWithOctomap(const test::MappingPreset& preset) {
   const test::SimulatedMappingSequence sequence = test::simulateMappingSequence(preset, 4, 5);
+  const std::vector<Eigen::Vector3f> scene = test::sceneSurfaceNearRoute(preset, sequence);
   const std::vector<Eigen::Vector3f> ours = tsdfSurface(preset, sequence);
   const std::vector<Eigen::Vector3f> octomap = octomapSurface(preset, sequence);
-  std::printf("%s, %zu scans, voxel %.2f m, clip %.0f m, %zu ground-truth samples:\n", preset.name.c_str(),
-              sequence.scans.size(), preset.voxel_m, preset.max_range_m, sequence.surface.size());
+  std::printf("%s, %zu scans, voxel %.2f m, clip %.0f m, %zu ground-truth samples (%zu on the scene near the "
+              "route):\n",
+              preset.name.c_str(), sequence.scans.size(), preset.voxel_m, preset.max_range_m, sequence.surface.size(),
+              scene.size());
+  const std::vector<float> ours_to_scene = evaluation::nearestDistances(ours, scene);
+  const std::vector<float> octomap_to_scene = evaluation::nearestDistances(octomap, scene);
+  const auto onScene = [](const std::vector<float>& distances, double threshold) {
+    return double(std::count_if(distances.begin(), distances.end(), [&](float d) { return d < threshold; })) /
+           double(distances.size());
+  };
   for (const double voxels : {3.0, 1.0, 0.5}) {
-    const evaluation::SurfaceMetrics ours_metrics =
-        evaluation::compareSurfaces(ours, sequence.surface, voxels * preset.voxel_m);
+    const double threshold = voxels * preset.voxel_m;
+    const evaluation::SurfaceMetrics ours_metrics = evaluation::compareSurfaces(ours, sequence.surface, threshold);
     const evaluation::SurfaceMetrics octomap_metrics =
-        evaluation::compareSurfaces(octomap, sequence.surface, voxels * preset.voxel_m);
+        evaluation::compareSurfaces(octomap, sequence.surface, threshold);
+    const double ours_on_scene = onScene(ours_to_scene, threshold);
+    const double octomap_on_scene = onScene(octomap_to_scene, threshold);
     printMetrics("TSDF mesh", ours_metrics);
+    std::printf("  %-26s           P against the whole scene %.4f\n", "", ours_on_scene);
     printMetrics("OctoMap occupied centres", octomap_metrics);
+    std::printf("  %-26s           P against the whole scene %.4f\n", "", octomap_on_scene);
+    if (voxels == 3.0) {
+      EXPECT_GT(ours_metrics.recall, 0.98);
+      EXPECT_GT(ours_on_scene, 0.99);
+    }
     if (voxels == 0.5) {
       EXPECT_GT(ours_metrics.f_score, octomap_metrics.f_score);
       EXPECT_LT(ours_metrics.accuracy_median_m, octomap_metrics.accuracy_median_m);
@@ -106,13 +130,9 @@ void expectCloserToTheSurfaceThanOctomap(const test::MappingPreset& preset) {
   }
 }
 
-TEST(MappingAccuracy, IndoorCartMeshIsCloserToTheSurfaceThanOctomap) {
-  expectCloserToTheSurfaceThanOctomap(test::indoorCartPreset());
-}
+TEST(MappingAccuracy, IndoorCartMeshAgainstOctomap) { compareWithOctomap(test::indoorCartPreset()); }
 
-TEST(MappingAccuracy, OutdoorCarMeshIsCloserToTheSurfaceThanOctomap) {
-  expectCloserToTheSurfaceThanOctomap(test::outdoorCarPreset());
-}
+TEST(MappingAccuracy, OutdoorCarMeshAgainstOctomap) { compareWithOctomap(test::outdoorCarPreset()); }
 
 // ---------------------------------------------------------------- analytic scenes
 

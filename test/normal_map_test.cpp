@@ -175,5 +175,31 @@ TEST(NormalMap, AllInvalidImageGivesNoPointsAndNoNormals) {
   }
 }
 
+// levelPixelIndex shifts for power-of-two strides and divides otherwise;
+// both must give the nearest level pixel of the plain formula, for every
+// full-resolution pixel, including the last rows (clamped) and the columns
+// that round up to column W (wrapped to 0).
+TEST(LevelPixelIndex, NearestLevelPixelForEveryStride) {
+  constexpr int kRows = 128, kColumns = 1024;
+  for (int stride = 1; stride <= 16; ++stride) {
+    VertexNormalMap level;
+    level.stride = stride;
+    level.rows = (kRows + stride - 1) / stride;
+    level.columns = (kColumns + stride - 1) / stride;
+    for (int row = 0; row < kRows; ++row) {
+      for (int column = 0; column < kColumns; ++column) {
+        ProjectedPixel pixel;
+        pixel.row = row;
+        pixel.column = column;
+        const int expected_row = std::min(int(std::floor((row + stride / 2) / double(stride))), level.rows - 1);
+        int expected_column = int(std::floor((column + stride / 2) / double(stride)));
+        if (expected_column >= level.columns) expected_column = 0;
+        ASSERT_EQ(levelPixelIndex(level, pixel), std::size_t(expected_row) * level.columns + expected_column)
+            << "stride " << stride << " pixel (" << row << ", " << column << ")";
+      }
+    }
+  }
+}
+
 }  // namespace
 }  // namespace range_image_mapping::registration

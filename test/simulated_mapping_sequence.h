@@ -66,7 +66,7 @@ inline SimulatedMappingSequence simulateMappingSequence(const MappingPreset& pre
                                                         double seen_distance_m = 0.0) {
   using namespace simulation;
   constexpr double kFrequencyHz = 10.0, kStartS = 1.0;
-  constexpr uint32_t kSeed = 1;
+  constexpr uint32_t kSeed = 1;  // also in sceneSurfaceNearRoute
   SceneOptions scene_options;
   scene_options.kind = preset.scene;
   scene_options.seed = kSeed;
@@ -108,6 +108,26 @@ inline SimulatedMappingSequence simulateMappingSequence(const MappingPreset& pre
   sampling.seed = kSeed;
   sequence.surface = sampleSeenSurface(scene.mesh, seen, sampling);
   return sequence;
+}
+
+// Every surface of the preset's scene within the range clip (plus a metre) of
+// the sequence's poses, seen or not, at the preset's spacing: what a map's
+// points are on when they are on a real surface, for precision where the
+// seen-surface truth is thin (between beam rings, where no hit fell).
+inline std::vector<Eigen::Vector3f> sceneSurfaceNearRoute(const MappingPreset& preset,
+                                                          const SimulatedMappingSequence& sequence) {
+  using namespace simulation;
+  SceneOptions scene_options;
+  scene_options.kind = preset.scene;
+  scene_options.seed = 1;  // as simulateMappingSequence
+  const Scene scene = generateScene(scene_options);
+  SeenRegion near_route(preset.max_range_m + 1.0);
+  for (const mapping::ScanPose& pose : sequence.poses)
+    near_route.addHit(pose.world_from_lidar.translation().cast<float>());
+  SurfaceSampleOptions sampling;
+  sampling.spacing_m = preset.sampleSpacingM();
+  sampling.seed = 1;
+  return sampleSeenSurface(scene.mesh, near_route, sampling);
 }
 
 // A mesh as surface samples for compareSurfaces: a grid of the given spacing

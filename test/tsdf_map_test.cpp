@@ -255,6 +255,27 @@ TEST(TsdfMap, MeshFollowsTheMapAndIsSavedAsPly) {
   std::remove(path.c_str());
 }
 
+// A budgeted Mapper meshes a few blocks per update and lets blocks that
+// changed by less than the tolerance wait; the saved mesh must still be the
+// whole map's, exactly as one full extraction gives it.
+TEST(TsdfMap, FullMeshIsExactWhateverTheUpdateBudget) {
+  TsdfMapOptions options = mapOptions();
+  options.mesh.max_blocks_per_update = 5;
+  TsdfMap map(options);
+  for (double x : {0.0, 0.4, 0.8}) {
+    const Scan scan = scanAt(x);
+    ASSERT_TRUE(map.integrate(scan.image, scan.pose).integrated);
+    map.updateMesh();
+  }
+  ASSERT_GT(map.mesh().pendingCount(), 0u) << "the budget should have left blocks to mesh";
+  const TriangleMeshData full = map.fullMesh();
+  const TriangleMeshData reference = extractMesh(map.grid(), options.mesh);
+  EXPECT_EQ(map.mesh().pendingCount(), 0u);
+  ASSERT_GT(reference.triangles.size(), 1000u);
+  EXPECT_EQ(full.triangles.size(), reference.triangles.size());
+  EXPECT_EQ(full.vertices.size(), reference.vertices.size());
+}
+
 TEST(TsdfMap, ResetForgetsTheMapAndTheLastPose) {
   TsdfMap map(mapOptions());
   const Scan start = scanAt(0.0), far = scanAt(50.0);
@@ -285,6 +306,9 @@ TEST(TsdfMap, BadOptionsNameTheField) {
   EXPECT_TRUE(contains(message([](TsdfMapOptions& o) { o.grid.voxel_size_m = 0.0; }), "voxel_size_m"));
   EXPECT_TRUE(contains(message([](TsdfMapOptions& o) { o.integrator.point_stride = 0; }), "point_stride"));
   EXPECT_TRUE(contains(message([](TsdfMapOptions& o) { o.mesh.min_weight = -1.0f; }), "min_weight"));
+  EXPECT_TRUE(contains(message([](TsdfMapOptions& o) { o.mesh.min_weight = 1.0f; }), "must equal mesh.min_weight"));
+  EXPECT_EQ(message([](TsdfMapOptions& o) { o.mesh.min_weight = o.integrator.mesh_min_weight = 1.0f; }),
+            "no exception");
   EXPECT_EQ(message([](TsdfMapOptions& o) { o.memory_radius_m = 12.5; }), "no exception");
 }
 

@@ -40,6 +40,14 @@ constexpr float kSmallestPlaneCosine = 1e-3f;
 // (Measured on outdoor_car: 1 voxel let roofs and facade tops run on past
 // their edges, precision at 3 voxels 0.994 against 0.998.)
 constexpr double kPlaneSeenToleranceVoxels = 0.5;
+// Point-to-plane: blocks are activated within the truncation plus this share
+// of a pixel's footprint along the ray (voxels in blocks activated by any
+// pixel are written as far as the whole footprint). Every point between two
+// beam rings is within half a footprint of one of them; the rest reaches the
+// voxel layer under the plane. Measured on flat ground under an OS1-128:
+// coverage 0.1-0.7 % lower than with the whole footprint, 6 % fewer blocks
+// (a half: 10 % fewer, coverage 1-2.5 % lower).
+constexpr float kPlaneActivationShare = 0.75f;
 // Poses whose rotation is off orthonormal by more than this are rejected.
 constexpr double kOrthonormalTolerance = 1e-3;
 // Projections of a voxel into the moving sensor before it counts as not
@@ -138,7 +146,7 @@ struct BlockWriter {
   float drift = 0.0f;
   bool topology = false;
 
-  inline void operator()(std::size_t i, std::size_t p, float distance) {
+  [[gnu::always_inline]] inline void operator()(std::size_t i, std::size_t p, float distance) {
     const float old_sdf = sdf[i], old_weight = weight[i];
     voxel_update.apply(sdf[i], weight[i], std::min(distance, truncation),
                        sample_weights ? sample_weights[p] : 1.0f, intensity ? intensity + i : nullptr,
@@ -349,7 +357,10 @@ int columnSeenFromMovingSensor(const LidarModel& model, const SweepMotion& motio
 // seam): they miss this scan rather than being averaged with the wrong
 // sensor position.
 void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion, const StaggerGuess& stagger,
-                             const Eigen::Vector3f& block_centre, std::size_t voxels, BlockBuffers& buffers) {
+                             const Eigen::Vector3f& first, const Eigen::Matrix3f& lattice_steps, int edge,
+                             BlockBuffers& buffers) {
+  const std::size_t voxels = std::size_t(edge) * edge * edge;
+  const Eigen::Vector3f block_centre = first + lattice_steps * Eigen::Vector3f::Constant(0.5f * float(edge - 1));
   const int centre_column = columnSeenFromMovingSensor(model, motion, block_centre);
   if (centre_column >= 0) {
     // In the frame of the centre's column, where the rows that see the
@@ -363,15 +374,23 @@ void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion,
     Eigen::Vector2f column_gradient = Eigen::Vector2f::Zero();
     if (planar_squared > 0.0f)
       column_gradient = Eigen::Vector2f(centre.y(), -centre.x()) * (float(columns) / (2.0f * float(M_PI)) / planar_squared);
-    for (std::size_t i = 0; i < voxels; ++i) {
-      const Eigen::Vector3f point = motion.toColumnFrame(centre_column, buffers.points[i]);
-      const float offset = column_gradient.dot((point - centre).head<2>());
-      int column = centre_column + int(std::lround(stagger.shift(point) - centre_shift + offset));
-      if (column < 0) column += columns;
-      if (column >= columns) column -= columns;
-      buffers.pixels[i].column = column;
-      buffers.hits[i] = 1;
-    }
+    // The block's lattice in that frame, built as the voxels' (buffers.points).
+    const Eigen::Vector3f moved_first = motion.toColumnFrame(centre_column, first);
+    const Eigen::Matrix3f moved_steps = motion.inverse[centre_column].leftCols<3>() * lattice_steps;
+    std::size_t i = 0;
+    for (int k = 0; k < edge; ++k)
+      for (int j = 0; j < edge; ++j) {
+        const Eigen::Vector3f row_start = moved_first + moved_steps.col(1) * float(j) + moved_steps.col(2) * float(k);
+        for (int x = 0; x < edge; ++x, ++i) {
+          const Eigen::Vector3f point = row_start + moved_steps.col(0) * float(x);
+          const float shift = stagger.shift(point) - centre_shift + column_gradient.dot((point - centre).head<2>());
+          int column = centre_column + int(shift + (shift >= 0.0f ? 0.5f : -0.5f));  // rounded (lround is a libm call)
+          if (column < 0) column += columns;
+          if (column >= columns) column -= columns;
+          buffers.pixels[i].column = column;
+          buffers.hits[i] = 1;
+        }
+      }
   } else {  // the centre is outside the field of view: start from the scan-time projection
     model.projectMany(buffers.points.data(), voxels, buffers.pixels.data(), buffers.hits.data());
   }
@@ -628,11 +647,12 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
             const float r = scan.range[scan.index(v, u)];
             if (!(r >= min_range && r <= max_range)) continue;  // also NaN
             ++used;
-            // Point-to-plane reaches along the pixel's plane to its neighbours' returns.
+            // Point-to-plane reaches along the pixel's plane towards its
+            // neighbours' returns (kPlaneActivationShare of the way).
             float reach = truncation;
             if (point_to_plane) {
               const float plane_reach = work.pixel_planes[scan.index(v, u)].reach;
-              if (std::isfinite(plane_reach)) reach = plane_reach;
+              if (std::isfinite(plane_reach)) reach = truncation + kPlaneActivationShare * (plane_reach - truncation);
             }
             Eigen::Vector3f near_point = model.unproject(u, v, std::max(r - reach, 0.0f));
             Eigen::Vector3f far_point = model.unproject(u, v, r + reach);
@@ -728,9 +748,7 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
           for (int i = 0; i < edge; ++i) buffers.points[n++] = row_start + lattice_steps.col(0) * float(i);
         }
       if (moving) {
-        const Eigen::Vector3f centre =
-            first + lattice_steps * Eigen::Vector3f::Constant(0.5f * float(edge - 1));
-        projectIntoMovingSensor(model, sweep_motion, work.stagger, centre, voxels, buffers);
+        projectIntoMovingSensor(model, sweep_motion, work.stagger, first, lattice_steps, edge, buffers);
       } else {
         model.projectMany(buffers.points.data(), voxels, buffers.pixels.data(), buffers.hits.data());
       }

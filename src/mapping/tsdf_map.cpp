@@ -10,6 +10,12 @@ void TsdfMapOptions::validate() const {
   grid.validate();
   integrator.validate(grid);
   mesh.validate();
+  // The integrator marks a block for re-meshing when a voxel crosses the
+  // mesher's weight threshold: with two different thresholds blocks would
+  // be re-meshed too late or for nothing.
+  if (integrator.mesh_min_weight != mesh.min_weight)
+    throw MappingError("integrator.mesh_min_weight (" + numberText(integrator.mesh_min_weight) +
+                       ") must equal mesh.min_weight (" + numberText(mesh.min_weight) + ")");
   if (!(memory_radius_m >= 0.0) || !std::isfinite(memory_radius_m))
     throw MappingError("memory_radius_m must be >= 0 and finite (0 = keep everything), got " +
                        numberText(memory_radius_m));
@@ -112,7 +118,9 @@ MapStatistics TsdfMap::statistics() const {
 }
 
 TriangleMeshData TsdfMap::fullMesh() {
-  updateMesh();
+  // Every block, whatever the update budget and the tolerance that lets
+  // slightly changed blocks wait: a saved mesh is exactly the map's.
+  extractor_.update(grid_, /*force_all=*/true);
   TriangleMeshData mesh = extractor_.combined();
   for (const MeshChunk& chunk : dropped_chunks_) {
     const int offset = int(mesh.vertices.size());

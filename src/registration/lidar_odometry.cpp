@@ -103,36 +103,69 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input) {
   const Eigen::Isometry3d target_from_previous = keyframe_pose_.inverse() * pose_;
   const Eigen::Isometry3d guess = target_from_previous * prior_step;
   computeVertexNormalMap(scan, 1, options_.registration.normals, measured_);
-  deskew(scan, stamp, options_.deskew ? prior_twist : Vector6d::Zero());
-  RegistrationResult result = icp_.align(deskewed_, guess);
-  // The prior's twist is one step late: wrong where the motion changes (a
-  // turn's start, vibration), and the source deskewed with it warped. Deskew
-  // again with the velocity the registration measured and register again at
-  // the finest level, until the pose settles. The measured velocity
-  // overshoots the true one, opposite to the deskew error and by about half
-  // of it (the registration fits the scan's average warp), so the next
-  // deskew blends it with the one used: plain substitution oscillates and
-  // converges slowly, extrapolation diverges. Only against a deskewed target:
-  // a source deskewed to a target that is not (the first after a restart)
-  // would be registered to a different shape.
-  constexpr double kMeasuredTwistShare = 0.6;
+  icp_.setSource(measured_);
+  // The source is deskewed inside the registration: each column moved by
+  // exp((t - t0) twist) before the pose (none for a zero twist or a scan
+  // without column times).
+  static const std::vector<ColumnMotion> kNoMotion;
+  const auto columnMotion = [&](const Vector6d& twist) -> const std::vector<ColumnMotion>& {
+    return computeColumnMotion(scan, stamp, twist, column_motion_) ? column_motion_ : kNoMotion;
+  };
   Vector6d deskew_twist = options_.deskew ? prior_twist : Vector6d::Zero();
-  for (int pass = 0; pass < options_.deskew_passes && target_deskewed_ && isFinite(result.target_from_source) &&
-                     result.inliers >= options_.min_inliers;
-       ++pass) {
-    const Vector6d measured_twist =
-        twistBetween(pose_, keyframe_pose_ * result.target_from_source, dt);
-    deskew_twist = kMeasuredTwistShare * measured_twist + (1.0 - kMeasuredTwistShare) * deskew_twist;
-    deskew(scan, stamp, deskew_twist);
-    const Eigen::Isometry3d before = result.target_from_source;
-    const int iterations = result.iterations;
-    result = icp_.align(deskewed_, before, options_.registration.strides.size() - 1);
-    result.iterations += iterations;
-    const Vector6d change = twistLogarithm(before.inverse() * result.target_from_source);
-    if (!isFinite(result.target_from_source) ||
-        (change.head<3>().norm() < options_.deskew_convergence_rad &&
-         change.tail<3>().norm() < options_.deskew_convergence_m))
-      break;
+  // The prior's twist is one step late: wrong where the motion changes (a
+  // turn's start, vibration), and the source deskewed with it warped. So
+  // the finest level alternates Gauss-Newton steps with deskews by the
+  // velocity the current pose implies, and the pose and the deskew converge
+  // together: registering to convergence after every deskew took three to
+  // four steps per deskew, twice the steps in all for the same poses. The
+  // velocity is measured once a step is small (the pose fits the current
+  // deskew to within kMeasurableScale times the convergence thresholds):
+  // from a pose still far from that, it is wrong enough that a few passes
+  // end worse than none. The measured velocity overshoots the true one,
+  // opposite to the deskew error and by about half of it (the registration
+  // fits the scan's average warp), so the next deskew blends it with the
+  // one used: plain substitution oscillates and converges slowly,
+  // extrapolation diverges. Only against a deskewed target: a source
+  // deskewed to a target that is not (the first after a restart) would be
+  // registered to a different shape.
+  constexpr double kMeasuredTwistShare = 0.6;
+  constexpr double kMeasurableScale = 100.0;
+  const std::size_t finest = options_.registration.strides.size() - 1;
+  RegistrationResult result;
+  if (!options_.deskew || options_.deskew_passes == 0 || !target_deskewed_) {
+    result = icp_.alignSource(guess, {}, columnMotion(deskew_twist));
+  } else {
+    LevelSchedule coarse;
+    coarse.end_level = finest;
+    result = icp_.alignSource(guess, coarse, columnMotion(deskew_twist));
+    LevelSchedule step;
+    step.first_level = finest;
+    step.max_iterations = 1;
+    const auto below = [&](const Vector6d& change, double scale) {
+      return change.head<3>().norm() < scale * options_.deskew_convergence_rad &&
+             change.tail<3>().norm() < scale * options_.deskew_convergence_m;
+    };
+    int passes = 0;
+    bool measurable = false;
+    const int max_steps = options_.registration.iterations[finest] + 2 * options_.deskew_passes;
+    for (int k = 0; k < max_steps && isFinite(result.target_from_source); ++k) {
+      const bool redeskewed = measurable && passes < options_.deskew_passes;
+      if (redeskewed) {
+        const Vector6d measured_twist = twistBetween(pose_, keyframe_pose_ * result.target_from_source, dt);
+        deskew_twist = kMeasuredTwistShare * measured_twist + (1.0 - kMeasuredTwistShare) * deskew_twist;
+        ++passes;
+      }
+      const Eigen::Isometry3d before = result.target_from_source;
+      const int iterations = result.iterations;
+      result = icp_.alignSource(before, step, columnMotion(deskew_twist));
+      result.iterations += iterations;
+      if (result.inliers < options_.min_inliers) break;  // degenerate: the check below falls back
+      const Vector6d change = twistLogarithm(before.inverse() * result.target_from_source);
+      // Settled: a deskew that no longer moves the pose, or the passes spent
+      // and the pose converged on the last one.
+      if (below(change, 1.0) && (redeskewed || passes == options_.deskew_passes)) break;
+      measurable = below(change, kMeasurableScale);
+    }
   }
   update.inliers = result.inliers;
   update.iterations = result.iterations;
@@ -169,7 +202,10 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input) {
 
   // The next target: this scan deskewed with the velocity just estimated.
   const bool deskewed = options_.deskew && computeColumnMotion(scan, stamp, twist_, column_motion_);
-  if (deskewed) moveColumns(measured_, deskewed_);
+  if (deskewed)
+    moveColumns(measured_, deskewed_);
+  else
+    deskewed_ = measured_;
   const Eigen::Isometry3d from_keyframe = keyframe_pose_.inverse() * pose_;
   const bool keyframes = options_.keyframe_distance_m > 0.0 || options_.keyframe_angle_rad > 0.0;
   const bool new_keyframe =
@@ -218,15 +254,9 @@ void LidarOdometry::moveColumns(const VertexNormalMap& measured, VertexNormalMap
   });
 }
 
-void LidarOdometry::deskew(const RangeImage& scan, uint64_t stamp_ns, const Vector6d& twist) {
-  if (computeColumnMotion(scan, stamp_ns, twist, column_motion_))
-    moveColumns(measured_, deskewed_);
-  else
-    deskewed_ = measured_;
-}
-
 void LidarOdometry::makeTarget(const RangeImage& scan, bool deskewed) {
-  icp_.setTarget(scan);
+  // Full resolution: this scan's map, deskewed already when it should be.
+  icp_.setTarget(scan, deskewed_);
   if (!deskewed) return;
   // The target pyramid deskewed point by point, then filed under the pixel
   // each moved point projects to (nearest first), so that projective
@@ -235,11 +265,14 @@ void LidarOdometry::makeTarget(const RangeImage& scan, bool deskewed) {
   const LidarModel& model = *scan.model;
   for (std::size_t level = 0; level < options_.registration.strides.size(); ++level) {
     VertexNormalMap& map = icp_.targetLevel(level);
-    moveColumns(map, map);
+    if (map.stride != 1) moveColumns(map, map);
     const std::size_t size = map.points.size();
     pixels_.resize(size);
     hits_.resize(size);
-    model.projectMany(map.points.data(), size, pixels_.data(), hits_.data());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, size, 4096), [&](const tbb::blocked_range<std::size_t>& block) {
+      model.projectMany(map.points.data() + block.begin(), block.size(), pixels_.data() + block.begin(),
+                        hits_.data() + block.begin());
+    });
     filed_.rows = map.rows;
     filed_.columns = map.columns;
     filed_.stride = map.stride;

@@ -29,21 +29,19 @@ struct LevelNeighbourhood {
   const VertexNormalMap& map;
   ImageView<const float> ranges;  // the image at this level
   float jump_per_pixel;           // max_range_jump_ratio * stride
-  // Azimuth of column 0 of each full-resolution row, in columns.
-  const std::vector<float>& full_row_azimuth_columns;
+  // Per level row, the column shift to the same azimuth in each row of the
+  // window (row steps -radius..radius), from the rows' azimuth offsets.
+  int radius;
+  const std::vector<int>& row_shifts;
 
   int wrapColumn(int column) const {
+    if (unsigned(column) < unsigned(map.columns)) return column;
     column %= map.columns;
     return column < 0 ? column + map.columns : column;
   }
   // Level column in row + row_step next to (row, column) in azimuth.
   int alignedColumn(int row, int row_step, int column) const {
-    if (row_step == 0) return column;
-    // The azimuth falls as the column grows: a row that starts further left
-    // reaches the same azimuth further right.
-    const float difference = full_row_azimuth_columns[std::size_t(row + row_step) * map.stride] -
-                             full_row_azimuth_columns[std::size_t(row) * map.stride];
-    return column + int(std::lround(difference / float(map.stride)));
+    return column + row_shifts[std::size_t(row) * (2 * radius + 1) + (row_step + radius)];
   }
   // -1: outside the image or no point there, 0: usable, 1: across a depth discontinuity.
   int classify(int row, int row_step, int column, float centre_range, int pixel_distance) const {
@@ -175,9 +173,14 @@ void computeVertexNormalMap(const RangeImage& image, int stride, const NormalMap
   });
 
   // Row azimuths from the model's own rays (rather than the destagger shifts,
-  // which only approximate them), relative to row 0 and wrapped to half a turn.
-  thread_local std::vector<float> row_azimuth_columns;
-  row_azimuth_columns.resize(image.rows());
+  // which only approximate them), relative to row 0 and wrapped to half a
+  // turn, in full-resolution columns; then the shift between each level row
+  // and its window's rows in level columns. The azimuth falls as the column
+  // grows: a row that starts further left reaches the same azimuth further
+  // right. (Two small allocations per call: thread_local buffers would be
+  // overwritten if this thread, waiting in parallel_for below, ran a task
+  // that computes another map.)
+  std::vector<float> row_azimuth_columns(image.rows());
   const auto azimuthOfRow = [&](int row) {
     const Eigen::Vector3f& direction = model.direction(0, row);
     return std::atan2(double(direction.y()), double(direction.x()));
@@ -187,8 +190,17 @@ void computeVertexNormalMap(const RangeImage& image, int stride, const NormalMap
     const double turn = std::remainder(azimuthOfRow(row) - first_azimuth, 2.0 * M_PI);
     row_azimuth_columns[row] = float(turn * image.columns() / (2.0 * M_PI));
   }
-  const std::vector<float>& row_azimuths = row_azimuth_columns;  // this thread's, shared with the workers
-  const LevelNeighbourhood level{out, view, options.max_range_jump_ratio * float(stride), row_azimuths};
+  const int radius = options.method == NormalMethod::kCrossProduct ? 1 : options.window_radius;
+  std::vector<int> row_shifts(std::size_t(out.rows) * (2 * radius + 1), 0);
+  for (int row = 0; row < out.rows; ++row) {
+    for (int step = -radius; step <= radius; ++step) {
+      if (step == 0 || row + step < 0 || row + step >= out.rows) continue;
+      const float difference = row_azimuth_columns[std::size_t(row + step) * stride] -
+                               row_azimuth_columns[std::size_t(row) * stride];
+      row_shifts[std::size_t(row) * (2 * radius + 1) + (step + radius)] = int(std::lround(difference / float(stride)));
+    }
+  }
+  const LevelNeighbourhood level{out, view, options.max_range_jump_ratio * float(stride), radius, row_shifts};
   tbb::parallel_for(tbb::blocked_range<int>(0, out.rows), [&](const tbb::blocked_range<int>& rows) {
     for (int row = rows.begin(); row != rows.end(); ++row) {
       for (int column = 0; column < out.columns; ++column) {

@@ -292,8 +292,16 @@ MapperParameters readMapperParameters(const ros::NodeHandle& private_node) {
       reader.getDouble("range_weighting_start", defaults.map.integrator.range_weighting_start_m, -kAny, kAny);
   map.integrator.incidence_weighting =
       reader.getBool("incidence_weighting", defaults.map.integrator.incidence_weighting);
+  map.integrator.signed_distance =
+      reader.getChoice("signed_distance", "point_to_plane", {"point_to_plane", "along_ray"}) == "along_ray"
+          ? mapping::SignedDistance::kAlongRay
+          : mapping::SignedDistance::kPointToPlane;
+  map.integrator.mesh_tolerance_voxels =
+      reader.getDouble("mesh_tolerance", defaults.map.integrator.mesh_tolerance_voxels, -kAny, kAny);
+  map.mesh.update_budget_s = reader.getDouble("mesh_update_budget", defaults.map.mesh.update_budget_s, -kAny, kAny);
   map.mesh.min_weight =
       static_cast<float>(reader.getDouble("mesh_min_weight", defaults.map.mesh.min_weight, -kAny, kAny));
+  map.integrator.mesh_min_weight = map.mesh.min_weight;  // one threshold, see TsdfMapOptions::validate
   map.memory_radius_m = reader.getDouble("memory_radius", defaults.map.memory_radius_m, -kAny, kAny);
   map.keep_dropped_mesh = reader.getBool("keep_dropped_mesh", defaults.map.keep_dropped_mesh);
   map.max_pose_jump_m = reader.getDouble("max_pose_jump", defaults.map.max_pose_jump_m, -kAny, kAny);

@@ -38,11 +38,20 @@ struct VertexNormalMap {
 
 // Nearest pixel of a level to a full-resolution pixel (level pixel (i, j) is
 // full pixel (s i, s j)): columns wrap (column W is column 0), rows clamp.
+// Called for every pair of every ICP iteration: strides that are powers of
+// two (the usual pyramid) shift instead of dividing.
 inline std::size_t levelPixelIndex(const VertexNormalMap& level, const ProjectedPixel& pixel) {
   const int s = level.stride;
-  int row = (pixel.row + s / 2) / s;
+  int row = pixel.row + s / 2, column = pixel.column + s / 2;
+  if ((s & (s - 1)) == 0) {
+    const int shift = __builtin_ctz(unsigned(s));
+    row >>= shift;
+    column >>= shift;
+  } else {
+    row /= s;
+    column /= s;
+  }
   if (row >= level.rows) row = level.rows - 1;
-  int column = (pixel.column + s / 2) / s;
   if (column >= level.columns) column = 0;
   return std::size_t(row) * level.columns + column;
 }

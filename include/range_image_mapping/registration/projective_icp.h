@@ -4,9 +4,11 @@
 #pragma once
 
 #include "range_image_mapping/registration/normal_map.h"
+#include "range_image_mapping/scan_motion.h"
 
 #include <Eigen/Geometry>
 
+#include <limits>
 #include <vector>
 
 namespace range_image_mapping::registration {
@@ -26,7 +28,11 @@ struct RegistrationOptions {
   std::vector<int> strides{4, 2, 1};        // pyramid levels, coarse to fine
   std::vector<int> iterations{20, 20, 10};  // Gauss-Newton iterations per level (paper)
   int source_stride = 1;                    // extra subsampling of the source at every level
-  double max_correspondence_distance_m = 1.0;
+  double max_correspondence_distance_m = 1.0;  // pairs further apart are rejected (full resolution)
+  // A level of stride s accepts pairs s times as far apart: the coarse
+  // levels capture motions beyond the gate (from an identity guess, scans
+  // metres apart), the fine ones reject outliers.
+  bool gate_grows_with_stride = true;
   double min_normal_cosine = 0.8;           // source and target normals must agree
   RobustKernel kernel;
   NormalMapOptions normals;
@@ -48,6 +54,15 @@ struct RegistrationResult {
   double residual_rms_m = 0;
 };
 
+// The part of the pyramid one align() call runs: levels first_level up to
+// (not including) end_level, clamped to the pyramid, each with at most
+// max_iterations Gauss-Newton steps (0: RegistrationOptions::iterations).
+struct LevelSchedule {
+  std::size_t first_level = 0;
+  std::size_t end_level = std::numeric_limits<std::size_t>::max();
+  int max_iterations = 0;
+};
+
 // The target's vertex/normal maps are built once per target and reused.
 // align() reuses internal buffers: one instance must not align from several
 // threads at once (each call is parallel inside, with TBB).
@@ -61,6 +76,11 @@ class ProjectiveIcp {
   // of the image; the image itself is not kept. Throws std::invalid_argument
   // for an image without a model or destaggered.
   void setTarget(const RangeImage& target);
+  // The same, with the image's full-resolution map already computed (with
+  // these options' normals; its points may have been moved, e.g. deskewed):
+  // levels of stride 1 copy it instead of computing it again. Throws
+  // std::invalid_argument when its size or stride does not match the image.
+  void setTarget(const RangeImage& target, const VertexNormalMap& full_resolution);
   bool hasTarget() const { return target_model_ != nullptr; }
   const VertexNormalMap& targetLevel(std::size_t level) const { return target_levels_.at(level); }
   // For callers that move the target's points after setTarget (deskewing):
@@ -72,21 +92,54 @@ class ProjectiveIcp {
   // s * source_stride pixels. Throws std::runtime_error without a target,
   // std::invalid_argument for a non-finite initial pose. Levels before
   // first_level are skipped (a refinement from an already close pose).
+  // Replaces the source given to setSource().
   RegistrationResult align(const VertexNormalMap& source_full_resolution,
                            const Eigen::Isometry3d& initial_target_from_source,
                            std::size_t first_level = 0) const;
+  // Only the levels and iterations of `schedule` (e.g. one step at the finest
+  // level between two deskews). No level in the range: the initial pose, no
+  // pairs.
+  RegistrationResult align(const VertexNormalMap& source_full_resolution,
+                           const Eigen::Isometry3d& initial_target_from_source, const LevelSchedule& schedule) const;
   // Convenience: computes the source map itself.
   RegistrationResult align(const RangeImage& source, const Eigen::Isometry3d& initial_target_from_source) const;
+
+  // For several registrations of one source (e.g. with different deskews):
+  // its pixels with normals, subsampled for every level, kept until the next
+  // setSource() or align(map). Throws std::invalid_argument when the map's
+  // sizes do not match.
+  void setSource(const VertexNormalMap& source_full_resolution);
+  // Registers the source given to setSource(). With column_motion (per
+  // full-resolution column, [R | t] from the column's time to the scan time,
+  // as computeColumnMotion gives it), every point is moved by its column's
+  // motion first: the source is deskewed inside the registration, at no
+  // extra cost per point, instead of in a moved copy. Throws
+  // std::runtime_error without a target or a source, std::invalid_argument
+  // for a non-finite initial pose or column_motion too short for the source.
+  RegistrationResult alignSource(const Eigen::Isometry3d& initial_target_from_source,
+                                 const LevelSchedule& schedule = {},
+                                 const std::vector<ColumnMotion>& column_motion = {}) const;
 
   const RegistrationOptions& options() const { return options_; }
 
  private:
+  // One level's source pixels with normals, and the full-resolution column
+  // of each (for its column motion).
+  struct SourceLevel {
+    std::vector<Eigen::Vector3f> points, normals;
+    std::vector<int> columns;
+  };
+  void prepareSource(const VertexNormalMap& source) const;
+
   RegistrationOptions options_;
   LidarModelConstPtr target_model_;
   std::vector<VertexNormalMap> target_levels_;  // one per options_.strides entry
   // Reused between calls (no per-frame allocation in steady state).
   mutable VertexNormalMap source_map_;
-  mutable std::vector<Eigen::Vector3f> source_points_, source_normals_;
+  mutable std::vector<SourceLevel> source_levels_;  // one per options_.strides entry
+  mutable bool has_source_ = false;
+  mutable std::size_t source_full_columns_ = 0;  // columns of the source's full resolution
+  mutable std::vector<ColumnMotion> column_transforms_;  // per column: target_from_source * motion
 };
 
 }  // namespace range_image_mapping::registration
