@@ -14,6 +14,7 @@
 #include "range_image_mapping/mapping/tsdf_map.h"
 #include "range_image_mapping/ros/parameters.h"
 #include "range_image_mapping/ros/range_image_conversions.h"
+#include "range_image_mapping/ros/statistics_window.h"
 #include "range_image_mapping/ros/steady_throttle.h"
 #include "range_image_mapping/scan_motion.h"
 
@@ -79,21 +80,6 @@ struct MapperStatistics {
     d.mesh_updates = mesh_updates - earlier.mesh_updates;
     d.mesh_seconds = mesh_seconds - earlier.mesh_seconds;
     return d;
-  }
-};
-
-// The statistics of one window and its wall-clock length.
-struct StatisticsWindow {
-  MapperStatistics start;
-  ros::SteadyTime started;
-
-  std::pair<MapperStatistics, double> advance(const MapperStatistics& now) {
-    const ros::SteadyTime time = ros::SteadyTime::now();
-    const double period = started.isZero() ? 0.0 : (time - started).toSec();
-    const MapperStatistics window = now - start;
-    start = now;
-    started = time;
-    return {window, period};
   }
 };
 
@@ -295,7 +281,7 @@ class MapperNodelet : public nodelet::Nodelet {
   bool full_resend_ = true;
 
   MapperStatistics statistics_;
-  StatisticsWindow log_window_, diagnostics_window_;
+  StatisticsWindow<MapperStatistics> log_window_, diagnostics_window_;
   std::string last_warning_;
   SteadyThrottle warning_log_, drop_log_, error_log_, triangle_log_;
 };

@@ -8,6 +8,7 @@
 #include "range_image_mapping/LidarRangeImage.h"
 #include "range_image_mapping/registration/lidar_odometry.h"
 #include "range_image_mapping/ros/parameters.h"
+#include "range_image_mapping/ros/statistics_window.h"
 #include "range_image_mapping/ros/steady_throttle.h"
 #include "range_image_mapping/ros/range_image_conversions.h"
 
@@ -70,22 +71,6 @@ struct OdometryStatistics {
     d.rejected = rejected - earlier.rejected;
     d.seconds = seconds - earlier.seconds;
     return d;
-  }
-};
-
-// The statistics of one window and its wall-clock length.
-struct StatisticsWindow {
-  OdometryStatistics start;
-  ros::SteadyTime started;
-
-  // Returns the difference since the last call and starts a new window.
-  std::pair<OdometryStatistics, double> advance(const OdometryStatistics& now) {
-    const ros::SteadyTime time = ros::SteadyTime::now();
-    const double period = started.isZero() ? 0.0 : (time - started).toSec();
-    const OdometryStatistics window = now - start;
-    start = now;
-    started = time;
-    return {window, period};
   }
 };
 
@@ -183,7 +168,7 @@ class OdometryNodelet : public nodelet::Nodelet {
   std::optional<uint32_t> last_frame_counter_;
 
   OdometryStatistics statistics_;
-  StatisticsWindow log_window_, diagnostics_window_;
+  StatisticsWindow<OdometryStatistics> log_window_, diagnostics_window_;
   registration::OdometryUpdate last_update_;
   std::string last_warning_;
   SteadyThrottle warning_log_, error_log_, frame_log_;

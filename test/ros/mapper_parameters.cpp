@@ -2,6 +2,7 @@
 // bad values rejected with an error naming the parameter; and a Mapper nodelet
 // with a bad parameter fails to load instead of running without a map. Needs
 // a master only for the parameter server.
+#include "error_text.h"
 #include "range_image_mapping/ros/parameters.h"
 
 #include <gtest/gtest.h>
@@ -14,15 +15,7 @@
 namespace range_image_mapping {
 namespace {
 
-template <typename Function>
-std::string errorOf(Function&& function) {
-  try {
-    function();
-  } catch (const ParameterError& error) {
-    return error.what();
-  }
-  return "(no error)";
-}
+using test::errorOf;
 
 TEST(MapperParameters, DefaultsWhenNothingIsSet) {
   const MapperParameters parameters = readMapperParameters(ros::NodeHandle("~empty"));
@@ -42,6 +35,10 @@ TEST(MapperParameters, DefaultsWhenNothingIsSet) {
   EXPECT_EQ(parameters.map.integrator.point_stride, core.integrator.point_stride);
   EXPECT_EQ(parameters.map.integrator.max_weight, core.integrator.max_weight);
   EXPECT_EQ(parameters.map.mesh.min_weight, core.mesh.min_weight);
+  EXPECT_EQ(parameters.map.integrator.mesh_min_weight, core.integrator.mesh_min_weight);
+  EXPECT_EQ(parameters.map.integrator.signed_distance, core.integrator.signed_distance);
+  EXPECT_EQ(parameters.map.integrator.mesh_tolerance_voxels, core.integrator.mesh_tolerance_voxels);
+  EXPECT_EQ(parameters.map.mesh.update_budget_s, core.mesh.update_budget_s);
   EXPECT_EQ(parameters.map.memory_radius_m, core.memory_radius_m);
   EXPECT_EQ(parameters.map.max_pose_jump_m, core.max_pose_jump_m);
 }
@@ -63,7 +60,17 @@ TEST(MapperParameters, ValuesReachTheCoreOptions) {
   node.setParam("deskew", false);
   node.setParam("mesh_rate", 5);
   node.setParam("marker_chunk_blocks", 2);
+  node.setParam("signed_distance", "along_ray");
+  node.setParam("mesh_tolerance", 0.0);
+  node.setParam("mesh_update_budget", 0.015);
+  node.setParam("mesh_min_weight", 1.0);
   const MapperParameters parameters = readMapperParameters(node);
+  EXPECT_EQ(parameters.map.integrator.signed_distance, mapping::SignedDistance::kAlongRay);
+  EXPECT_EQ(parameters.map.integrator.mesh_tolerance_voxels, 0.0);
+  EXPECT_EQ(parameters.map.mesh.update_budget_s, 0.015);
+  // One threshold for the mesher and for the integrator's re-mesh marks.
+  EXPECT_EQ(parameters.map.mesh.min_weight, 1.0f);
+  EXPECT_EQ(parameters.map.integrator.mesh_min_weight, 1.0f);
   EXPECT_EQ(parameters.map.grid.voxel_size_m, 0.05);
   EXPECT_EQ(parameters.map.grid.block_edge, 16);
   EXPECT_EQ(parameters.map.integrator.truncation_m, 0.2);
@@ -118,6 +125,12 @@ TEST(MapperParameters, BadValuesAreErrorsNamingTheParameter) {
   EXPECT_NE(deskew.find("deskew must be true or false, got a string"), std::string::npos) << deskew;
   const std::string heights = errorFor("height_color_max", -5.0);
   EXPECT_NE(heights.find("height_color_max (-5) must be above"), std::string::npos) << heights;
+  const std::string distance = errorFor("signed_distance", std::string("euclidean"));
+  EXPECT_NE(distance.find("signed_distance is 'euclidean', expected one of: point_to_plane, along_ray"),
+            std::string::npos)
+      << distance;
+  const std::string budget = errorFor("mesh_update_budget", -1.0);
+  EXPECT_NE(budget.find("update_budget_s"), std::string::npos) << budget;
   const std::string chunk = errorFor("marker_chunk_blocks", 0);
   EXPECT_NE(chunk.find("marker_chunk_blocks is 0, expected within [1, 64]"), std::string::npos) << chunk;
 }

@@ -1,6 +1,7 @@
 // readOdometryParameters: defaults, values read into the core's options, and
 // bad values rejected with an error naming the parameter. Needs a master only
 // for the parameter server.
+#include "error_text.h"
 #include "range_image_mapping/ros/parameters.h"
 
 #include <gtest/gtest.h>
@@ -13,15 +14,7 @@
 namespace range_image_mapping {
 namespace {
 
-template <typename Function>
-std::string errorOf(Function&& function) {
-  try {
-    function();
-  } catch (const ParameterError& error) {
-    return error.what();
-  }
-  return "(no error)";
-}
+using test::errorOf;
 
 TEST(OdometryParameters, DefaultsWhenNothingIsSet) {
   const OdometryParameters parameters = readOdometryParameters(ros::NodeHandle("~empty"));

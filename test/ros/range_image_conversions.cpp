@@ -1,4 +1,5 @@
 // The ROS-side conversions and parameter checks, without a running Adapter.
+#include "error_text.h"
 #include "range_image_mapping/ros/parameters.h"
 #include "range_image_mapping/ros/range_image_conversions.h"
 
@@ -61,15 +62,7 @@ bool sameFloats(const std::vector<float>& a, const std::vector<float>& b) {
   return true;
 }
 
-template <typename Function>
-std::string errorOf(Function&& function) {
-  try {
-    function();
-  } catch (const std::invalid_argument& error) {
-    return error.what();
-  }
-  return "(no error)";
-}
+using test::errorOf;
 
 // ------------------------------------------------------------ LidarRangeImage
 
