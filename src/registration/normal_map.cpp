@@ -43,16 +43,18 @@ struct LevelNeighbourhood {
   int alignedColumn(int row, int row_step, int column) const {
     return column + row_shifts[std::size_t(row) * (2 * radius + 1) + (row_step + radius)];
   }
-  // -1: outside the image or no point there, 0: usable, 1: across a depth discontinuity.
-  int classify(int row, int row_step, int column, float centre_range, int pixel_distance) const {
+  // A neighbour's index in the level, or one of these: outside the image or
+  // no point there, or across a depth discontinuity. Found once per
+  // neighbour: its range decides, its point is then read by index.
+  static constexpr std::ptrdiff_t kMissing = -1, kAcrossEdge = -2;
+  std::ptrdiff_t neighbour(int row, int row_step, int column, float centre_range, int pixel_distance) const {
     const int neighbour_row = row + row_step;
-    if (neighbour_row < 0 || neighbour_row >= map.rows) return -1;
-    const float range = ranges(neighbour_row, wrapColumn(alignedColumn(row, row_step, column)));
-    if (!isValidRange(range)) return -1;
-    return std::abs(range - centre_range) > jump_per_pixel * pixel_distance * centre_range ? 1 : 0;
-  }
-  const Eigen::Vector3f& point(int row, int row_step, int column) const {
-    return map.points[std::size_t(row + row_step) * map.columns + wrapColumn(alignedColumn(row, row_step, column))];
+    if (neighbour_row < 0 || neighbour_row >= map.rows) return kMissing;
+    const int neighbour_column = wrapColumn(alignedColumn(row, row_step, column));
+    const float range = ranges(neighbour_row, neighbour_column);
+    if (!isValidRange(range)) return kMissing;
+    if (std::abs(range - centre_range) > jump_per_pixel * pixel_distance * centre_range) return kAcrossEdge;
+    return std::ptrdiff_t(neighbour_row) * map.columns + neighbour_column;
   }
 };
 
@@ -68,16 +70,17 @@ Eigen::Vector3f facingSensor(const Eigen::Vector3f& normal, const Eigen::Vector3
 // mixed returns and occlusion shadows make the normal unreliable).
 bool tangent(const LevelNeighbourhood& level, int row, int column, int row_step, int column_step,
              float centre_range, Eigen::Vector3f& out) {
-  const int after = level.classify(row, row_step, column + column_step, centre_range, 1);
-  const int before = level.classify(row, -row_step, column - column_step, centre_range, 1);
-  if (after == 1 || before == 1) return false;
-  const Eigen::Vector3f& centre = level.point(row, 0, column);
-  if (after == 0 && before == 0) {
-    out = level.point(row, row_step, column + column_step) - level.point(row, -row_step, column - column_step);
-  } else if (after == 0) {
-    out = level.point(row, row_step, column + column_step) - centre;
-  } else if (before == 0) {
-    out = centre - level.point(row, -row_step, column - column_step);
+  const std::ptrdiff_t after = level.neighbour(row, row_step, column + column_step, centre_range, 1);
+  const std::ptrdiff_t before = level.neighbour(row, -row_step, column - column_step, centre_range, 1);
+  if (after == LevelNeighbourhood::kAcrossEdge || before == LevelNeighbourhood::kAcrossEdge) return false;
+  const std::vector<Eigen::Vector3f>& points = level.map.points;
+  const Eigen::Vector3f& centre = points[std::size_t(row) * level.map.columns + column];
+  if (after >= 0 && before >= 0) {
+    out = points[after] - points[before];
+  } else if (after >= 0) {
+    out = points[after] - centre;
+  } else if (before >= 0) {
+    out = centre - points[before];
   } else {
     return false;
   }
@@ -94,23 +97,24 @@ Eigen::Vector3f crossProductNormal(const LevelNeighbourhood& level, int row, int
   const float norm = normal.norm();
   // Nearly parallel tangents (a surface seen edge-on) have no reliable normal.
   if (!(norm > 1e-3f * along_row.norm() * along_column.norm())) return kInvalid;
-  return facingSensor(normal / norm, level.point(row, 0, column));
+  return facingSensor(normal / norm, level.map.points[std::size_t(row) * level.map.columns + column]);
 }
 
 Eigen::Vector3f covarianceNormal(const LevelNeighbourhood& level, int row, int column, float centre_range,
                                  int radius) {
   // Centred on the pixel's own point so that float sums stay exact enough far
   // from the sensor; the covariance itself is accumulated in double.
-  const Eigen::Vector3f& centre = level.point(row, 0, column);
+  const Eigen::Vector3f& centre = level.map.points[std::size_t(row) * level.map.columns + column];
   Eigen::Vector3d sum = Eigen::Vector3d::Zero();
   Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();
   int count = 0;
   for (int dr = -radius; dr <= radius; ++dr) {
     for (int dc = -radius; dc <= radius; ++dc) {
-      const int kind = level.classify(row, dr, column + dc, centre_range, std::max(std::abs(dr), std::abs(dc)));
-      if (kind == 1) return kInvalid;  // on an edge, as for the cross product
-      if (kind != 0) continue;
-      const Eigen::Vector3d d = (level.point(row, dr, column + dc) - centre).cast<double>();
+      const std::ptrdiff_t index =
+          level.neighbour(row, dr, column + dc, centre_range, std::max(std::abs(dr), std::abs(dc)));
+      if (index == LevelNeighbourhood::kAcrossEdge) return kInvalid;  // on an edge, as for the cross product
+      if (index < 0) continue;
+      const Eigen::Vector3d d = (level.map.points[index] - centre).cast<double>();
       sum += d;
       outer.noalias() += d * d.transpose();
       ++count;

@@ -1,10 +1,12 @@
 #include "range_image_mapping/registration/projective_icp.h"
 
 #include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
 #include <Eigen/Eigenvalues>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <limits>
@@ -17,10 +19,41 @@ namespace {
 using Matrix6d = Eigen::Matrix<double, 6, 6>;
 using Vector6d = Eigen::Matrix<double, 6, 1>;
 
+// Source points go through Pi in chunks of this size, on the stack of the
+// thread that owns them.
+constexpr std::size_t kProjectionChunk = 256;
+// Float lanes of the per-chunk sums: two SSE (one AVX) registers.
+constexpr std::size_t kLanes = 8;
+
+// One chunk's pairs as a structure of arrays (rows: the point-to-plane
+// jacobian [p x n, n], the weight, the residual), zero-padded to whole
+// lanes: every sum over the chunk is a loop the compiler vectorises.
+struct ChunkPairs {
+  enum Row { kWeight = 6, kResidual = 7, kRows = 8 };
+  alignas(32) float rows[kRows][kProjectionChunk];
+  std::size_t count = 0;
+
+  // sum_k a[k] b[k] * c[k] (c may be null: 1) over the padded chunk, in
+  // kLanes float partial sums: at most kProjectionChunk / kLanes terms each,
+  // so float stays exact to about 1e-6 of the chunk's sum, far below what
+  // the solve resolves; the chunks are then summed in double.
+  double sum(const float* a, const float* b, const float* c) const {
+    float lanes[kLanes] = {};
+    const std::size_t padded = (count + kLanes - 1) / kLanes * kLanes;
+    for (std::size_t k = 0; k < padded; k += kLanes)
+      for (std::size_t l = 0; l < kLanes; ++l) lanes[l] += a[k + l] * b[k + l] * (c ? c[k + l] : 1.0f);
+    double total = 0.0;
+    for (float lane : lanes) total += lane;
+    return total;
+  }
+  void pad() {
+    const std::size_t padded = (count + kLanes - 1) / kLanes * kLanes;
+    for (auto& row : rows) std::fill(row + count, row + padded, 0.0f);
+  }
+};
+
 // Normal equations of one Gauss-Newton step, summed per thread and joined.
-// The hessian is kept as its 21 upper-triangle entries (row by row): a
-// rank-one update of those is plain arithmetic the compiler unrolls, where a
-// generic symmetric product is a call per pair.
+// The hessian is kept as its 21 upper-triangle entries (row by row).
 struct NormalEquations {
   std::array<double, 21> hessian_upper{};
   Vector6d gradient = Vector6d::Zero();
@@ -33,16 +66,19 @@ struct NormalEquations {
     squared_residuals += other.squared_residuals;
     inliers += other.inliers;
   }
-  // J^T W J += weight J J^T; J^T W r += weight residual J.
-  void addPair(const double (&jacobian)[6], double weight, double residual) {
+  // J^T W J += sum_k w_k J_k J_k^T; J^T W r += sum_k w_k r_k J_k (paper eq. 6).
+  void add(ChunkPairs& pairs) {
+    if (pairs.count == 0) return;
+    pairs.pad();
+    const float* weights = pairs.rows[ChunkPairs::kWeight];
+    const float* residuals = pairs.rows[ChunkPairs::kResidual];
     std::size_t k = 0;
     for (int i = 0; i < 6; ++i) {
-      const double weighted = weight * jacobian[i];
-      for (int j = i; j < 6; ++j) hessian_upper[k++] += weighted * jacobian[j];
-      gradient(i) += weighted * residual;
+      for (int j = i; j < 6; ++j) hessian_upper[k++] += pairs.sum(pairs.rows[i], pairs.rows[j], weights);
+      gradient(i) += pairs.sum(pairs.rows[i], residuals, weights);
     }
-    squared_residuals += residual * residual;
-    ++inliers;
+    squared_residuals += pairs.sum(residuals, residuals, nullptr);
+    inliers += pairs.count;
   }
   Matrix6d hessian() const {
     Matrix6d full;
@@ -85,10 +121,6 @@ class KernelWeight {
   double alpha_, inverse_scale_squared_, inverse_alpha_distance_;
 };
 
-// Source points go through Pi in chunks of this size, on the stack of the
-// thread that owns them.
-constexpr std::size_t kProjectionChunk = 256;
-
 // Where each source point goes in the target frame: one rigid transform,
 // or one per full-resolution column (the target_from_source transform
 // composed with the column's deskew motion).
@@ -119,17 +151,17 @@ NormalEquations accumulate(const std::vector<Eigen::Vector3f>& points, const std
   return tbb::parallel_reduce(
       tbb::blocked_range<std::size_t>(0, points.size(), 2048), NormalEquations{},
       [&](const tbb::blocked_range<std::size_t>& block, NormalEquations sum) {
-        std::array<Eigen::Vector3f, kProjectionChunk> moved, pair_points, pair_normals;
+        std::array<Eigen::Vector3f, kProjectionChunk> moved;
         std::array<ProjectedPixel, kProjectionChunk> pixels;
         std::array<uint8_t, kProjectionChunk> hits;
-        alignas(16) std::array<float, kProjectionChunk> residuals, weights;
+        ChunkPairs pairs;
         for (std::size_t first = block.begin(); first < block.end(); first += kProjectionChunk) {
           const std::size_t count = std::min(kProjectionChunk, block.end() - first);
           for (std::size_t k = 0; k < count; ++k) moved[k] = motion.move(points[first + k], columns[first + k]);
           target_model.projectMany(moved.data(), count, pixels.data(), hits.data());
           // Association first, then the arithmetic on the pairs found: the
-          // weights' square roots and divisions vectorise.
-          std::size_t pairs = 0;
+          // weights' square roots and the sums vectorise.
+          pairs.count = 0;
           for (std::size_t k = 0; k < count; ++k) {
             if (!hits[k]) continue;
             const std::size_t t = levelPixelIndex(target, pixels[k]);
@@ -139,18 +171,16 @@ NormalEquations accumulate(const std::vector<Eigen::Vector3f>& points, const std
             if (!(difference.squaredNorm() <= max_distance_squared)) continue;
             const Eigen::Vector3f source_normal = motion.rotationOf(columns[first + k]) * normals[first + k];
             if (!(source_normal.dot(target_normal) >= min_cosine)) continue;
-            pair_points[pairs] = moved[k];
-            pair_normals[pairs] = target_normal;
-            residuals[pairs] = target_normal.dot(difference);
-            ++pairs;
+            const Eigen::Vector3f moment = moved[k].cross(target_normal);
+            const std::size_t n = pairs.count++;
+            for (int axis = 0; axis < 3; ++axis) {
+              pairs.rows[axis][n] = moment(axis);
+              pairs.rows[3 + axis][n] = target_normal(axis);
+            }
+            pairs.rows[ChunkPairs::kResidual][n] = target_normal.dot(difference);
           }
-          weight_of.weights(residuals.data(), pairs, weights.data());
-          for (std::size_t k = 0; k < pairs; ++k) {
-            const Eigen::Vector3f moment = pair_points[k].cross(pair_normals[k]);
-            const double jacobian[6] = {moment.x(),          moment.y(),          moment.z(),
-                                        pair_normals[k].x(), pair_normals[k].y(), pair_normals[k].z()};
-            sum.addPair(jacobian, weights[k], residuals[k]);
-          }
+          weight_of.weights(pairs.rows[ChunkPairs::kResidual], pairs.count, pairs.rows[ChunkPairs::kWeight]);
+          sum.add(pairs);
         }
         return sum;
       },
@@ -295,19 +325,41 @@ void ProjectiveIcp::prepareSource(const VertexNormalMap& source) const {
   for (std::size_t level = 0; level < options_.strides.size(); ++level) {
     // The source at the same spacing as the target level.
     const int step = std::max(1, options_.strides[level] / source.stride) * options_.source_stride;
-    SourceLevel& kept = source_levels_[level];
-    kept.points.clear();
-    kept.normals.clear();
-    kept.columns.clear();
-    for (int row = 0; row < source.rows; row += step) {
-      for (int column = 0; column < source.columns; column += step) {
-        const std::size_t i = std::size_t(row) * source.columns + column;
-        if (!std::isfinite(source.normals[i].x()) || !std::isfinite(source.points[i].x())) continue;
-        kept.points.push_back(source.points[i]);
-        kept.normals.push_back(source.normals[i]);
-        kept.columns.push_back(column * source.stride);
+    const int rows = (source.rows + step - 1) / step;
+    const auto usable = [&](std::size_t i) {
+      return std::isfinite(source.normals[i].x()) && std::isfinite(source.points[i].x());
+    };
+    // Two parallel passes over the kept rows: how many pixels each keeps,
+    // then each row's pixels copied to its offset (the same order as one
+    // serial pass).
+    row_offsets_.assign(std::size_t(rows) + 1, 0);
+    tbb::parallel_for(tbb::blocked_range<int>(0, rows), [&](const tbb::blocked_range<int>& block) {
+      for (int r = block.begin(); r < block.end(); ++r) {
+        const std::size_t first = std::size_t(r) * step * source.columns;
+        std::size_t kept = 0;
+        for (int column = 0; column < source.columns; column += step) kept += usable(first + column);
+        row_offsets_[r + 1] = kept;
       }
-    }
+    });
+    for (int r = 0; r < rows; ++r) row_offsets_[r + 1] += row_offsets_[r];
+    SourceLevel& kept = source_levels_[level];
+    kept.points.resize(row_offsets_[rows]);
+    kept.normals.resize(row_offsets_[rows]);
+    kept.columns.resize(row_offsets_[rows]);
+    tbb::parallel_for(tbb::blocked_range<int>(0, rows), [&](const tbb::blocked_range<int>& block) {
+      for (int r = block.begin(); r < block.end(); ++r) {
+        const std::size_t first = std::size_t(r) * step * source.columns;
+        std::size_t out = row_offsets_[r];
+        for (int column = 0; column < source.columns; column += step) {
+          const std::size_t i = first + column;
+          if (!usable(i)) continue;
+          kept.points[out] = source.points[i];
+          kept.normals[out] = source.normals[i];
+          kept.columns[out] = column * source.stride;
+          ++out;
+        }
+      }
+    });
   }
   source_full_columns_ = source.columns > 0 ? std::size_t(source.columns - 1) * source.stride + 1 : 0;
   has_source_ = true;

@@ -137,6 +137,7 @@ class ProjectiveIcp {
   // Reused between calls (no per-frame allocation in steady state).
   mutable VertexNormalMap source_map_;
   mutable std::vector<SourceLevel> source_levels_;  // one per options_.strides entry
+  mutable std::vector<std::size_t> row_offsets_;    // prepareSource: first kept pixel of each row
   mutable bool has_source_ = false;
   mutable std::size_t source_full_columns_ = 0;  // columns of the source's full resolution
   mutable std::vector<ColumnMotion> column_transforms_;  // per column: target_from_source * motion
