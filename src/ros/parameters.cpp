@@ -205,6 +205,7 @@ registration::RegistrationOptions readRegistrationOptions(const ParameterReader&
   options.source_stride = reader.getInt("source_stride", defaults.source_stride, 1, 64);
   options.max_correspondence_distance_m = reader.getDouble(
       "max_correspondence_distance", defaults.max_correspondence_distance_m, 1e-3, 100.0);
+  options.gate_grows_with_stride = reader.getBool("gate_grows_with_stride", defaults.gate_grows_with_stride);
   options.min_normal_cosine = reader.getDouble("min_normal_cosine", defaults.min_normal_cosine, -1.0, 1.0);
   options.kernel.type = reader.getChoice("kernel", "pseudo_huber", {"pseudo_huber", "barron"}) == "barron"
                             ? registration::RobustKernel::Type::kBarron
@@ -263,6 +264,7 @@ OdometryParameters readOdometryParameters(const ros::NodeHandle& private_node) {
       reader.getDouble("keyframe_angle_deg", odometry_defaults.keyframe_angle_rad * 180.0 / M_PI, 0.0, 180.0) *
       M_PI / 180.0;
   odometry.max_time_gap_s = reader.getDouble("max_time_gap", odometry_defaults.max_time_gap_s, 1e-3, 3600.0);
+  odometry.deskew_passes = reader.getInt("deskew_passes", odometry_defaults.deskew_passes, 0, 100);
   return parameters;
 }
 

@@ -32,6 +32,8 @@ TEST(OdometryParameters, DefaultsWhenNothingIsSet) {
   EXPECT_EQ(parameters.odometry.min_inliers, core.min_inliers);
   EXPECT_EQ(parameters.odometry.max_time_gap_s, core.max_time_gap_s);
   EXPECT_EQ(parameters.odometry.keyframe_angle_rad, core.keyframe_angle_rad);
+  EXPECT_EQ(parameters.odometry.deskew_passes, core.deskew_passes);
+  EXPECT_EQ(parameters.odometry.registration.gate_grows_with_stride, core.registration.gate_grows_with_stride);
 }
 
 TEST(OdometryParameters, ValuesReachTheCoreOptions) {
@@ -49,7 +51,11 @@ TEST(OdometryParameters, ValuesReachTheCoreOptions) {
   node.setParam("deskew", false);
   node.setParam("keyframe_angle_deg", 90.0);
   node.setParam("min_inliers", 50);
+  node.setParam("gate_grows_with_stride", false);
+  node.setParam("deskew_passes", 3);
   const OdometryParameters parameters = readOdometryParameters(node);
+  EXPECT_FALSE(parameters.odometry.registration.gate_grows_with_stride);
+  EXPECT_EQ(parameters.odometry.deskew_passes, 3);
   EXPECT_EQ(parameters.odom_frame, "wheel_odom");
   EXPECT_EQ(parameters.base_frame, "robot");
   EXPECT_TRUE(parameters.invert_tf);
