@@ -399,10 +399,6 @@ int run(int argc, char** argv) {
 }  // namespace range_image_mapping
 
 int main(int argc, char** argv) {
-  try {
-    return range_image_mapping::run(argc, argv);
-  } catch (const std::exception& error) {
-    std::fprintf(stderr, "long_drive_memory_benchmark: %s\n", error.what());
-    return 1;
-  }
+  using range_image_mapping::benchmark_support::runReportingErrors;
+  return runReportingErrors("long_drive_memory_benchmark", range_image_mapping::run, argc, argv);
 }

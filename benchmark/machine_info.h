@@ -3,7 +3,9 @@
 // shared so that the benchmarks' headers read alike.
 #pragma once
 
+#include <cstdio>
 #include <ctime>
+#include <exception>
 #include <fstream>
 #include <string>
 
@@ -36,6 +38,18 @@ inline std::string now() {
   char text[32];
   std::strftime(text, sizeof text, "%Y-%m-%d %H:%M", std::localtime(&time));
   return text;
+}
+
+// A benchmark's main(): runs it, and turns an exception (bad input, missing
+// data) into a message naming the program and exit status 1.
+template <typename Run>
+int runReportingErrors(const char* program, Run run, int argc, char** argv) {
+  try {
+    return run(argc, argv);
+  } catch (const std::exception& error) {
+    std::fprintf(stderr, "%s: %s\n", program, error.what());
+    return 1;
+  }
 }
 
 }  // namespace range_image_mapping::benchmark_support

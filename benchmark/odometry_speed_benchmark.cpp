@@ -14,6 +14,7 @@
 #include "range_image_mapping/ouster_metadata.h"
 #include "range_image_mapping/ouster_packet.h"
 #include "range_image_mapping/registration/lidar_odometry.h"
+#include "machine_info.h"
 #include "test_data.h"
 
 #include <pcl/filters/voxel_grid.h>
@@ -40,12 +41,7 @@ double secondsSince(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
 
-// CPU time of the whole process (every thread), in seconds.
-double processCpuSeconds() {
-  timespec now{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &now);
-  return double(now.tv_sec) + 1e-9 * double(now.tv_nsec);
-}
+using benchmark_support::processCpuSeconds;
 
 PointCloud::Ptr downsampledCloud(const RangeImage& image, double voxel_m) {
   PointCloud::Ptr cloud(new PointCloud);
@@ -155,10 +151,6 @@ int run(int argc, char** argv) {
 }  // namespace range_image_mapping
 
 int main(int argc, char** argv) {
-  try {
-    return range_image_mapping::run(argc, argv);
-  } catch (const std::exception& error) {
-    std::fprintf(stderr, "odometry_speed_benchmark: %s\n", error.what());
-    return 1;
-  }
+  using range_image_mapping::benchmark_support::runReportingErrors;
+  return runReportingErrors("odometry_speed_benchmark", range_image_mapping::run, argc, argv);
 }

@@ -24,6 +24,7 @@
 // Writes DIR/pairwise_registration.json and one box plot per method.
 //
 // Usage: pairwise_registration_benchmark DIR [pairs_per_distance=30] [voxel_m=auto] [seed=1]
+#include "machine_info.h"
 #include "range_image_mapping/evaluation/report.h"
 #include "range_image_mapping/evaluation/trajectory_metrics.h"
 #include "range_image_mapping/io/pcap_reader.h"
@@ -477,10 +478,6 @@ int run(int argc, char** argv) {
 }  // namespace range_image_mapping
 
 int main(int argc, char** argv) {
-  try {
-    return range_image_mapping::run(argc, argv);
-  } catch (const std::exception& error) {
-    std::fprintf(stderr, "pairwise_registration_benchmark: %s\n", error.what());
-    return 1;
-  }
+  using range_image_mapping::benchmark_support::runReportingErrors;
+  return runReportingErrors("pairwise_registration_benchmark", range_image_mapping::run, argc, argv);
 }
