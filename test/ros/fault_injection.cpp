@@ -26,6 +26,7 @@
 #include "range_image_mapping/ouster_packet.h"
 #include "range_image_mapping/ros/bag_writer.h"
 
+#include "rostest_main.h"
 #include "spin_until.h"
 
 #include <diagnostic_msgs/DiagnosticArray.h>
@@ -534,8 +535,5 @@ TEST_F(FaultInjectionTest, PipelineSurvivesFaultsAndKeepsItsMapAcrossABagLoop) {
 }  // namespace range_image_mapping
 
 int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "fault_injection");
-  ros::NodeHandle keep_node_alive;
-  return RUN_ALL_TESTS();
+  return range_image_mapping::test::runRostestNode(argc, argv, "fault_injection");
 }

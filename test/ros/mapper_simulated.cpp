@@ -10,6 +10,7 @@
 #include "range_image_mapping/evaluation/surface_metrics.h"
 #include "range_image_mapping/evaluation/trajectory_metrics.h"
 
+#include "rostest_main.h"
 #include "spin_until.h"
 
 #include <gtest/gtest.h>
@@ -310,12 +311,5 @@ TEST(MapperSimulated, MeshGrowsIncrementallyAndMatchesTheGroundTruth) {
 }  // namespace range_image_mapping
 
 int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "mapper_simulated");
-  ros::NodeHandle keep_node_alive;
-  const int result = RUN_ALL_TESTS();
-  // The generated sequence (write_odometry_bag.sh's folder) served its purpose.
-  const std::string sequence_dir = ros::NodeHandle("~").param<std::string>("sequence_dir", "");
-  if (!sequence_dir.empty()) std::filesystem::remove_all(sequence_dir);
-  return result;
+  return range_image_mapping::test::runRostestNode(argc, argv, "mapper_simulated");
 }

@@ -6,6 +6,7 @@
 // write_odometry_bag.sh writes the sequence while roslaunch loads the test.
 #include "range_image_mapping/evaluation/trajectory_metrics.h"
 
+#include "rostest_main.h"
 #include "spin_until.h"
 
 #include <geometry_msgs/TransformStamped.h>
@@ -231,12 +232,5 @@ TEST(OdometrySimulated, FollowsTheGroundTruthOnTfAndOdometry) {
 }  // namespace range_image_mapping
 
 int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "odometry_simulated");
-  ros::NodeHandle keep_node_alive;
-  const int result = RUN_ALL_TESTS();
-  // The generated sequence (write_odometry_bag.sh's folder) served its purpose.
-  const std::string sequence_dir = ros::NodeHandle("~").param<std::string>("sequence_dir", "");
-  if (!sequence_dir.empty()) std::filesystem::remove_all(sequence_dir);
-  return result;
+  return range_image_mapping::test::runRostestNode(argc, argv, "odometry_simulated");
 }

@@ -19,6 +19,7 @@
 #include "range_image_mapping/ros/range_image_conversions.h"
 #include "range_image_mapping/scan_motion.h"
 
+#include "rostest_main.h"
 #include "spin_until.h"
 
 #include <gtest/gtest.h>
@@ -180,11 +181,5 @@ TEST(RunMatchesNodelets, SamePosesAsRimRunOnTheSameSequence) {
 }  // namespace range_image_mapping
 
 int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "run_matches_nodelets");
-  ros::NodeHandle keep_node_alive;
-  const int result = RUN_ALL_TESTS();
-  const std::string sequence_dir = ros::NodeHandle("~").param<std::string>("sequence_dir", "");
-  if (!sequence_dir.empty() && result == 0) std::filesystem::remove_all(sequence_dir);
-  return result;
+  return range_image_mapping::test::runRostestNode(argc, argv, "run_matches_nodelets");
 }

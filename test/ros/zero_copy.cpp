@@ -21,6 +21,7 @@
 #include "range_image_mapping/LidarRangeImage.h"
 #include "range_image_mapping/SaveMesh.h"
 
+#include "rostest_main.h"
 #include "spin_until.h"
 
 #include <gtest/gtest.h>
@@ -222,11 +223,5 @@ TEST(ZeroCopy, NodeletsShareTheAdaptersImagesAndNothingChangesThem) {
 }  // namespace range_image_mapping
 
 int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "zero_copy");
-  ros::NodeHandle keep_node_alive;
-  const int result = RUN_ALL_TESTS();
-  const std::string sequence_dir = ros::NodeHandle("~").param<std::string>("sequence_dir", "");
-  if (!sequence_dir.empty()) std::filesystem::remove_all(sequence_dir);
-  return result;
+  return range_image_mapping::test::runRostestNode(argc, argv, "zero_copy");
 }
