@@ -118,6 +118,7 @@ TsdfIntegratorOptions alongRayOptions() {
   TsdfIntegratorOptions options;
   options.signed_distance = SignedDistance::kAlongRay;
   options.incidence_weighting = false;
+  options.free_space_weight = 1.0f;
   return options;
 }
 
@@ -518,6 +519,8 @@ TEST(TsdfIntegrator, BadInputThrowsAndLeavesTheGridBitIdentical) {
   withOptions([](TsdfIntegratorOptions& o) { o.max_weight = 0.0f; }, "max_weight");
   withOptions([](TsdfIntegratorOptions& o) { o.mesh_tolerance_voxels = -0.1; }, "mesh_tolerance_voxels");
   withOptions([](TsdfIntegratorOptions& o) { o.mesh_min_weight = std::nanf(""); }, "mesh_min_weight");
+  withOptions([](TsdfIntegratorOptions& o) { o.free_space_weight = 0.0f; }, "free_space_weight");
+  withOptions([](TsdfIntegratorOptions& o) { o.free_space_weight = std::nanf(""); }, "free_space_weight");
   withOptions([](TsdfIntegratorOptions& o) { o.signed_distance = SignedDistance(7); }, "signed_distance");
   withOptions(
       [](TsdfIntegratorOptions& o) {
@@ -622,6 +625,72 @@ TEST(TsdfIntegrator, RepeatedScansConvergeWithTheWeightCapped) {
     }
   }
   EXPECT_GT(compared, 100000u);
+}
+
+// Samples beyond the truncation in front of the surface weigh
+// free_space_weight: a single one cannot erase a surface, and an object
+// that went away still fades, over about 1 / free_space_weight scans.
+TEST(TsdfIntegrator, FreeSpaceSamplesWeighLessYetAGhostFades) {
+  const Simulated& sphere = sphereScan();
+  TsdfIntegratorOptions options = alongRayOptions();
+  options.free_space_weight = 0.1f;
+  {
+    VoxelBlockGrid grid(gridOptions());
+    TsdfIntegrator integrator(options);
+    integrator.integrate(grid, sphere.image, sphere.pose);
+    const double truncation = integrator.options().truncationFor(grid.options());
+    std::size_t free_space = 0, near_surface = 0;
+    forEachVoxel(grid, [&](const Eigen::Vector3i&, const Eigen::Vector3d& position, const Voxel& voxel) {
+      if (voxel.weight == 0.0f) return;
+      const double distance = sphereDistance(position);  // positive inside: the free space seen
+      if (distance > truncation + 0.01) {
+        ++free_space;
+        ASSERT_FLOAT_EQ(voxel.weight, 0.1f) << -distance << " m in front";
+        ASSERT_FLOAT_EQ(voxel.sdf, float(truncation));
+      } else if (distance < truncation - 0.01) {
+        ++near_surface;
+        ASSERT_FLOAT_EQ(voxel.weight, 1.0f) << distance << " m in front";
+      }
+    });
+    EXPECT_GT(free_space, 10000u);
+    EXPECT_GT(near_surface, 50000u);
+  }
+  // A box seen once against a room's wall, then the room without it from the
+  // same place. (Free space is written only in blocks a scan activates, near
+  // its returns: here the wall's.)
+  const TriangleMesh room = simulation::makeBox(Eigen::Vector3f(-7, -5, -1.5), Eigen::Vector3f(9, 6, 2.5), true);
+  TriangleMesh with_box = room;
+  const Eigen::Vector3f box_low(8.3f, -0.4f, -0.6f), box_high(9.0f, 0.4f, 0.2f);
+  with_box.append(simulation::makeBox(box_low, box_high));
+  const Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  const Simulated box_scan = simulateStill(with_box, pose);
+  const Simulated empty_scan = simulateStill(room, pose);
+  // Voxels with a negative value (at or behind a surface) behind the box's
+  // front face, short of the wall's own band.
+  const auto ghostVoxels = [&](const VoxelBlockGrid& grid) {
+    std::size_t negative = 0;
+    forEachVoxel(grid, [&](const Eigen::Vector3i&, const Eigen::Vector3d& position, const Voxel& voxel) {
+      const Eigen::Vector3f p = position.cast<float>();
+      const bool at_box = p.x() > box_low.x() - 0.15f && p.x() < 8.65f && std::abs(p.y()) < 0.35f &&
+                          p.z() > box_low.z() + 0.05f && p.z() < box_high.z() - 0.05f;
+      negative += at_box && voxel.weight > 0.0f && voxel.sdf < 0.0f;
+    });
+    return negative;
+  };
+  const auto ghostAfter = [&](float free_space_weight, int empty_scans) {
+    TsdfIntegratorOptions ghost_options = alongRayOptions();
+    ghost_options.free_space_weight = free_space_weight;
+    VoxelBlockGrid grid(gridOptions());
+    TsdfIntegrator integrator(ghost_options);
+    integrator.integrate(grid, box_scan.image, box_scan.pose);
+    const std::size_t seen = ghostVoxels(grid);
+    EXPECT_GT(seen, 50u);
+    for (int n = 0; n < empty_scans; ++n) integrator.integrate(grid, empty_scan.image, empty_scan.pose);
+    return ghostVoxels(grid);
+  };
+  EXPECT_GT(ghostAfter(0.1f, 3), 50u) << "three free-space samples at 0.1 erased the box";
+  EXPECT_EQ(ghostAfter(0.1f, 20), 0u) << "the box did not fade in 20 scans";
+  EXPECT_EQ(ghostAfter(1.0f, 2), 0u) << "at full weight the box should be gone after 2 scans";
 }
 
 TEST(TsdfIntegrator, DeintegrateUndoesIntegrate) {

@@ -141,15 +141,17 @@ struct BlockWriter {
   const float* sample_weights;    // per pixel; nullptr: every sample weighs 1
   const float* pixel_intensities;
   VoxelUpdate voxel_update;
-  float truncation, mesh_min_weight;
+  float truncation, mesh_min_weight, free_space_weight;
   uint32_t updated = 0;
   float drift = 0.0f;
   bool topology = false;
 
   [[gnu::always_inline]] inline void operator()(std::size_t i, std::size_t p, float distance) {
     const float old_sdf = sdf[i], old_weight = weight[i];
-    voxel_update.apply(sdf[i], weight[i], std::min(distance, truncation),
-                       sample_weights ? sample_weights[p] : 1.0f, intensity ? intensity + i : nullptr,
+    float sample_weight = sample_weights ? sample_weights[p] : 1.0f;
+    if (distance > truncation) sample_weight *= free_space_weight;  // free space only
+    voxel_update.apply(sdf[i], weight[i], std::min(distance, truncation), sample_weight,
+                       intensity ? intensity + i : nullptr,
                        intensity ? pixel_intensities[p] : 0.0f);
     drift = std::max(drift, std::abs(sdf[i] - old_sdf));
     topology = topology || (old_weight > 0.0f) != (weight[i] > 0.0f) ||
@@ -264,6 +266,8 @@ void TsdfIntegratorOptions::validate(const VoxelBlockGridOptions& grid) const {
   if (mesh_tolerance_voxels < 0.0)
     throw MappingError("mesh_tolerance_voxels must be >= 0 (0 = mark every change), got " +
                        numberText(mesh_tolerance_voxels));
+  if (!(free_space_weight > 0.0f && free_space_weight <= 1.0f))
+    throw MappingError("free_space_weight must be in (0, 1], got " + numberText(free_space_weight));
   if (!(mesh_min_weight >= 0.0f) || !std::isfinite(mesh_min_weight))
     throw MappingError("mesh_min_weight must be >= 0 and finite, got " + numberText(mesh_min_weight));
 }
@@ -711,6 +715,7 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
   work.block_drift.assign(touched_blocks_.size(), 0.0f);
   work.block_topology.assign(touched_blocks_.size(), 0);
   const float mesh_min_weight = options_.mesh_min_weight;
+  const float free_space_weight = options_.free_space_weight;
   const PixelPlane* planes = point_to_plane ? work.pixel_planes.data() : nullptr;
   const Eigen::Vector3f* pixel_points = point_to_plane ? work.normals.points.data() : nullptr;
   const float plane_tolerance = float(kPlaneSeenToleranceVoxels * grid.voxelSize());
@@ -760,7 +765,8 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
       float* sdf = block.sdf.data();
       float* weight = block.weight.data();
       float* intensity = with_intensity ? block.intensity.data() : nullptr;
-      BlockWriter write{sdf, weight, intensity, sample_weights, intensities, voxel_update, truncation, mesh_min_weight};
+      BlockWriter write{sdf,          weight,          intensity,        sample_weights, intensities,
+                        voxel_update, truncation,      mesh_min_weight, free_space_weight};
       if (!planes) {
         for (std::size_t i = 0; i < voxels; ++i) {
           if (!hits[i]) continue;

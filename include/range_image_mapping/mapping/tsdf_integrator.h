@@ -64,6 +64,17 @@ struct TsdfIntegratorOptions {
   bool range_weighting = false;
   double range_weighting_start_m = 10.0;
   bool incidence_weighting = true;
+  // A sample that puts a voxel farther in front of its pixel's surface than
+  // the truncation says only "free space here" (its value is truncated to
+  // +truncation), and weighs this many times a surface sample. A voxel on a
+  // thin or grazing surface (a table top seen edge-on, a shelf board, a pole)
+  // projects into pixels whose rays pass beside it and read the wall behind
+  // in most scans; at full weight those erase it. At 0.1 what moves away
+  // still fades, over a few scans (a surface sample's weight is 0.1-1 with
+  // incidence weighting). 1 = every sample alike (the paper's eq. 10).
+  // Measured (mapping_benchmark, 30 scans): recall at 3 voxels 0.9943 ->
+  // 0.998 indoors, 0.985 -> 0.992 outdoors.
+  float free_space_weight = 0.1f;
   // Incremental meshing (MeshExtractor re-meshes blocks whose
   // changed_generation is new): a block is marked only when the scan changed
   // something that can matter to its mesh: a voxel gained or lost its
