@@ -272,9 +272,11 @@ class MapperNodelet : public nodelet::Nodelet {
   std::optional<Eigen::Isometry3d> base_from_lidar_;
   ros::SteadyTime lidar_transform_wait_started_;
 
-  // The previous pose, for the twist over the sweep (deskew).
+  // The previous pose, for the twist over the sweep (deskew); its scan time on
+  // the sensor's clock (0 without column timestamps).
   std::optional<Eigen::Isometry3d> last_pose_;
   ros::Time last_pose_stamp_;
+  uint64_t last_sensor_time_ns_ = 0;
 
   // Marker chunks changed since their last publication, and those rviz holds.
   ChunkSet dirty_chunks_, published_chunks_;
@@ -483,20 +485,28 @@ void MapperNodelet::integrate(const LidarRangeImage& message, const Eigen::Isome
   // Column times are on the sensor's clock and the header stamp may be the
   // receive time: a zero stamp makes the core take the first valid column's
   // time as the scan time, so the per-column motion is measured from it.
+  uint64_t sensor_time_ns = 0;
   if (std::any_of(image.column_timestamp_ns.begin(), image.column_timestamp_ns.end(),
-                  [](uint64_t t) { return t != 0; }))
+                  [](uint64_t t) { return t != 0; })) {
     image.stamp_ns = 0;
+    sensor_time_ns = scanTime(image);
+  }
 
   mapping::ScanPose pose;
   pose.world_from_lidar = world_from_lidar;
-  // The sweep's motion, assumed constant: the twist since the previous pose.
+  // The sweep's motion, assumed constant: the twist since the previous pose,
+  // over the time between the scans on the sensor's clock when both have
+  // one (receive stamps jitter with the load), else between header stamps.
   if (parameters_.deskew && last_pose_ && message.header.stamp > last_pose_stamp_) {
-    const double dt_s = (message.header.stamp - last_pose_stamp_).toSec();
+    double dt_s = (message.header.stamp - last_pose_stamp_).toSec();
+    if (sensor_time_ns > last_sensor_time_ns_ && last_sensor_time_ns_ != 0)
+      dt_s = double(sensor_time_ns - last_sensor_time_ns_) * 1e-9;
     if (dt_s <= parameters_.max_time_gap_s) pose.twist = twistBetween(*last_pose_, world_from_lidar, dt_s);
   }
   if (world_from_lidar.matrix().allFinite()) {
     last_pose_ = world_from_lidar;
     last_pose_stamp_ = message.header.stamp;
+    last_sensor_time_ns_ = sensor_time_ns;
   }
 
   const auto start = std::chrono::steady_clock::now();
