@@ -7,7 +7,7 @@
 // On a shared machine wall time depends on the other jobs; the process CPU
 // time per step (all threads) is reported as well.
 //
-// Usage: odometry_speed_benchmark [SIMULATED_DIR | lb_n3] [pcl_pairs=20] [voxel_m=0.2] [threads=2]
+// Usage: odometry_speed_benchmark [SIMULATED_DIR | lb_n3] [pcl_pairs=20 (0: none)] [voxel_m=0.2] [threads=2]
 //   SIMULATED_DIR  a `rim simulate` Ouster directory (metadata.json, capture.pcap)
 //   lb_n3          the real 128 x 1024 recording in the data directory (default)
 #include "range_image_mapping/io/pcap_reader.h"
@@ -59,8 +59,8 @@ int run(int argc, char** argv) {
   const int pcl_pairs = argc > 2 ? std::atoi(argv[2]) : 20;
   const double voxel_m = argc > 3 ? std::atof(argv[3]) : 0.2;
   const int threads_used = argc > 4 ? std::atoi(argv[4]) : kDefaultThreads;
-  if (pcl_pairs < 1 || !(voxel_m > 0.0) || threads_used < 1) {
-    std::fprintf(stderr, "pcl_pairs and threads must be >= 1 and voxel_m > 0\n");
+  if (pcl_pairs < 0 || !(voxel_m > 0.0) || threads_used < 1) {
+    std::fprintf(stderr, "pcl_pairs must be >= 0 (0: no PCL), threads >= 1 and voxel_m > 0\n");
     return 2;
   }
   std::string pcap, json;
@@ -112,6 +112,10 @@ int run(int argc, char** argv) {
   std::sort(step_seconds.begin(), step_seconds.end());
   const double ours_fps = double(step_seconds.size()) / ours_total;
 
+  std::printf("%-34s %6zu steps  median %8.2f ms  %8.1f frames/s  CPU %8.2f ms/step\n", "LidarOdometry::process",
+              step_seconds.size(), step_seconds[step_seconds.size() / 2] * 1e3, ours_fps, ours_cpu_per_step * 1e3);
+  if (pcl_pairs == 0) return 0;
+
   // PCL GICP on the first consecutive pairs.
   const std::size_t pairs = std::min<std::size_t>(std::size_t(pcl_pairs), frames.size() - 1);
   std::vector<double> gicp_seconds;
@@ -137,8 +141,6 @@ int run(int argc, char** argv) {
   std::sort(gicp_seconds.begin(), gicp_seconds.end());
   const double gicp_fps = double(gicp_seconds.size()) / gicp_total;
 
-  std::printf("%-34s %6zu steps  median %8.2f ms  %8.1f frames/s  CPU %8.2f ms/step\n", "LidarOdometry::process",
-              step_seconds.size(), step_seconds[step_seconds.size() / 2] * 1e3, ours_fps, ours_cpu_per_step * 1e3);
   std::printf("%-34s %6zu pairs  median %8.2f ms  %8.1f frames/s  CPU %8.2f ms/pair  (voxel %.2f m, %.0f target points)\n",
               "PCL GICP", gicp_seconds.size(), gicp_seconds[gicp_seconds.size() / 2] * 1e3, gicp_fps,
               gicp_cpu_per_pair * 1e3, voxel_m, double(target_points) / double(pairs));

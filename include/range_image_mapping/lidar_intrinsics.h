@@ -17,6 +17,15 @@
 #include <string>
 #include <vector>
 
+// On a hot loop over plain arrays: an AVX2 clone besides the baseline build,
+// picked at load time for the CPU (the code is built without -march, for the
+// ABI shared with PCL and the nodelets). Elsewhere one version.
+#if defined(__x86_64__) && (defined(__clang__) ? __clang_major__ >= 14 : defined(__GNUC__))
+#define RANGE_IMAGE_MAPPING_AVX2_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define RANGE_IMAGE_MAPPING_AVX2_CLONES
+#endif
+
 namespace range_image_mapping {
 
 // Raised for intrinsics that cannot describe a sensor; the message names the field.
@@ -110,7 +119,8 @@ class LidarModel {
   std::vector<float> azimuth_offset_cos_, azimuth_offset_sin_;
   // Inverse altitude LUT (over sin of the altitude): bin -> rank in altitude
   // order, at least 2H bins, fine enough that the neighbour check is exact.
-  std::vector<int16_t> inverse_altitude_;
+  // 32-bit entries, as the other tables: projectMany's look-ups vectorise.
+  std::vector<int32_t> inverse_altitude_;
   std::vector<int> rows_by_altitude_;       // rank -> row, ascending altitude
   std::vector<float> cell_bound_;           // H+1 sines of the midpoints between ranks
   float table_bins_per_unit_ = 0.0f;

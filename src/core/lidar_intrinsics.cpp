@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <numeric>
 #include <sstream>
@@ -207,7 +208,7 @@ void LidarModel::buildInverseAltitudeTable() {
   for (std::size_t bin = 0; bin < bins; ++bin) {
     const double centre = accept_sin_low_ + (bin + 0.5) / table_bins_per_unit_;
     while (rank + 1 < rows && centre >= cell_bound_[rank + 1]) ++rank;
-    inverse_altitude_[bin] = static_cast<int16_t>(rank);
+    inverse_altitude_[bin] = rank;
   }
 }
 
@@ -287,6 +288,17 @@ inline int nearestColumn(float encoder_angle, float column_per_radian, float col
   return column - static_cast<int>(columns) * (column >= static_cast<int>(columns));  // seam
 }
 
+// value where keep is 1, +0.0f where it is 0 (a NaN value too), with a bit
+// mask: the vectoriser takes it where it does not take a select on a float
+// that may be NaN.
+inline float zeroUnless(float value, int keep) {
+  int32_t bits;
+  std::memcpy(&bits, &value, sizeof bits);
+  bits &= -keep;
+  std::memcpy(&value, &bits, sizeof value);
+  return value;
+}
+
 }  // namespace
 
 std::optional<ProjectedPixel> LidarModel::solveProjection(const Eigen::Vector3f& point,
@@ -322,16 +334,19 @@ std::optional<ProjectedPixel> LidarModel::solveProjection(const Eigen::Vector3f&
 }
 
 // The same arithmetic as solveProjection, in passes over blocks of points so
-// that the compiler vectorises the square roots and divisions; only the table
-// look-ups stay scalar. A point whose row changes on the re-check (rare) takes
-// the scalar path.
+// that the compiler vectorises the square roots, divisions and table look-ups
+// (as gathers). A point whose row changes on the re-check (rare) takes the
+// scalar path. Cloned for AVX2 (eight lanes instead of four; without FMA,
+// so every operation rounds as in solveProjection and the pixels are the same).
+RANGE_IMAGE_MAPPING_AVX2_CLONES
 void LidarModel::projectMany(const Eigen::Vector3f* points, std::size_t count, ProjectedPixel* pixels,
                              uint8_t* hits) const {
   constexpr std::size_t kBlock = 256;
   alignas(32) float x[kBlock], y[kBlock], rho_squared[kBlock], rho[kBlock], dz[kBlock];
   alignas(32) float sin_elevation[kBlock], offset_cos[kBlock], offset_sin[kBlock], offset[kBlock];
-  alignas(32) float ray_length[kBlock], encoder_angle[kBlock];
-  alignas(32) int row[kBlock];
+  alignas(32) float ray_length[kBlock], encoder_angle[kBlock], cell_low[kBlock], cell_high[kBlock];
+  alignas(32) int row[kBlock], same_row[kBlock];
+  const int last_bin = static_cast<int>(inverse_altitude_.size()) - 1;
   const float r0 = beam_origin_radius_;
   const float nearest_rho = kNearestAxisDistance * r0;
   const float columns = static_cast<float>(intrinsics_.columns);
@@ -349,10 +364,21 @@ void LidarModel::projectMany(const Eigen::Vector3f* points, std::size_t count, P
       const float planar = rho[i] - r0;
       sin_elevation[i] = dz[i] / std::sqrt(planar * planar + dz[i] * dz[i]);
     }
-    for (std::size_t i = 0; i < n; ++i) {
-      const bool usable = rho_squared[i] > 0.0f && rho[i] > nearest_rho;  // false for NaN
-      row[i] = usable ? nearestRow(sin_elevation[i]) : -1;
-      const int table_row = std::max(row[i], 0);
+    // nearestRow, and the tables of the row found. Conditions combine as
+    // integers and bit masks, not with && or ?: (branches and selects the
+    // vectoriser does not take).
+    for (std::size_t i = 0; i < n; ++i) {  // vectorised
+      const float sine = sin_elevation[i];
+      const int usable = int(rho_squared[i] > 0.0f) & int(rho[i] > nearest_rho) & int(sine >= accept_sin_low_) &
+                         int(sine <= accept_sin_high_);  // 0 for NaN
+      // The table position where usable, else 0 (never NaN or out of range).
+      const float position = zeroUnless((sine - accept_sin_low_) * table_bins_per_unit_, usable);
+      const int rank = inverse_altitude_[std::min(static_cast<int>(position), last_bin)];
+      const int nearest = rank + int(sine >= cell_bound_[rank + 1]) - int(sine < cell_bound_[rank]);
+      const int table_row = rows_by_altitude_[nearest] * usable;
+      row[i] = (table_row + 1) * usable - 1;  // -1 unless usable
+      cell_low[i] = cell_bound_[nearest];
+      cell_high[i] = cell_bound_[nearest + 1];
       offset_cos[i] = azimuth_offset_cos_[table_row];
       offset_sin[i] = azimuth_offset_sin_[table_row];
       offset[i] = azimuth_offset_[table_row];
@@ -361,15 +387,19 @@ void LidarModel::projectMany(const Eigen::Vector3f* points, std::size_t count, P
       const BeamOriginCorrection correction =
           correctForBeamOrigin(rho_squared[i], rho[i], dz[i], r0, offset_cos[i], offset_sin[i]);
       ray_length[i] = correction.ray_length;
-      sin_elevation[i] = dz[i] / correction.ray_length;
       encoder_angle[i] = encoderAngleOf(x[i], y[i], offset[i], correction.sin_delta);
+      // The re-check of the row: nearestRow of the new elevation is this row
+      // exactly when the elevation is within the accepted band and this row's cell.
+      const float sine = dz[i] / correction.ray_length;
+      same_row[i] = int(r0 == 0.0f) | (int(sine >= accept_sin_low_) & int(sine <= accept_sin_high_) &
+                                       int(sine >= cell_low[i]) & int(sine < cell_high[i]));
     }
     for (std::size_t i = 0; i < n; ++i) {
       if (row[i] < 0) {
         hits[start + i] = 0;
         continue;
       }
-      if (r0 != 0.0f && nearestRow(sin_elevation[i]) != row[i]) {
+      if (!same_row[i]) {
         const std::optional<ProjectedPixel> pixel = solveProjection(block[i], -1);
         hits[start + i] = pixel.has_value();
         if (pixel) pixels[start + i] = *pixel;

@@ -5,6 +5,7 @@
 #include <Eigen/LU>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -74,7 +75,8 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input) {
     return skip("range image with " + std::to_string(input.range.size()) + " ranges for a " +
                 std::to_string(input.rows()) + " x " + std::to_string(input.columns()) + " model");
   const RangeImage& scan = input.column_order == ColumnOrder::kStaggered ? input : (staggered_ = input.staggered());
-  if (scan.validCount() == 0) return skip("range image without a single valid range");
+  if (std::none_of(scan.range.begin(), scan.range.end(), isValidRange))
+    return skip("range image without a single valid range");
   const uint64_t stamp = scanTime(scan);
   update.stamp_ns = stamp;
 
@@ -107,9 +109,18 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input) {
   // The source is deskewed inside the registration: each column moved by
   // exp((t - t0) twist) before the pose (none for a zero twist or a scan
   // without column times).
+  // Every step at the finest level asks for the motions; they are computed
+  // again only when the deskew twist has changed.
   static const std::vector<ColumnMotion> kNoMotion;
+  bool motion_computed = false, has_motion = false;
+  Vector6d motion_twist;
   const auto columnMotion = [&](const Vector6d& twist) -> const std::vector<ColumnMotion>& {
-    return computeColumnMotion(scan, stamp, twist, column_motion_) ? column_motion_ : kNoMotion;
+    if (!motion_computed || twist != motion_twist) {
+      has_motion = computeColumnMotion(scan, stamp, twist, column_motion_);
+      motion_twist = twist;
+      motion_computed = true;
+    }
+    return has_motion ? column_motion_ : kNoMotion;
   };
   Vector6d deskew_twist = options_.deskew ? prior_twist : Vector6d::Zero();
   // The prior's twist is one step late: wrong where the motion changes (a

@@ -64,40 +64,78 @@ Eigen::Vector3f facingSensor(const Eigen::Vector3f& normal, const Eigen::Vector3
   return normal.dot(point) > 0.0f ? Eigen::Vector3f(-normal) : normal;
 }
 
-// Tangent along one image axis: the central difference when both neighbours
-// are usable, else the one-sided one. False when none is usable or a
-// neighbour is across a depth discontinuity (the pixel sits on an edge, where
-// mixed returns and occlusion shadows make the normal unreliable).
-bool tangent(const LevelNeighbourhood& level, int row, int column, int row_step, int column_step,
-             float centre_range, Eigen::Vector3f& out) {
-  const std::ptrdiff_t after = level.neighbour(row, row_step, column + column_step, centre_range, 1);
-  const std::ptrdiff_t before = level.neighbour(row, -row_step, column - column_step, centre_range, 1);
-  if (after == LevelNeighbourhood::kAcrossEdge || before == LevelNeighbourhood::kAcrossEdge) return false;
-  const std::vector<Eigen::Vector3f>& points = level.map.points;
-  const Eigen::Vector3f& centre = points[std::size_t(row) * level.map.columns + column];
-  if (after >= 0 && before >= 0) {
-    out = points[after] - points[before];
-  } else if (after >= 0) {
-    out = points[after] - centre;
-  } else if (before >= 0) {
-    out = centre - points[before];
-  } else {
-    return false;
+// Cross-product normals of one level row: the tangent along each image axis
+// is the central difference when both neighbours are usable, else the
+// one-sided one; none when neither is usable or a neighbour is across a depth
+// discontinuity (the pixel sits on an edge, where mixed returns and occlusion
+// shadows make the normal unreliable). The row's ranges, points and azimuth
+// shifts are looked up once per row: every scan's normals go through here.
+void crossProductNormalsOfRow(const LevelNeighbourhood& level, int row, Eigen::Vector3f* normals) {
+  const VertexNormalMap& map = level.map;
+  const int columns = map.columns;
+  const int range_step = level.ranges.fullColumn(1);  // level column -> element of the full row
+  // Row r's ranges and points, and the column shift to the same azimuth in
+  // it; null outside the image.
+  struct Row {
+    const float* ranges = nullptr;
+    const Eigen::Vector3f* points = nullptr;
+    int shift = 0;
+  };
+  const auto rowAt = [&](int row_step) {
+    Row neighbour;
+    const int r = row + row_step;
+    if (r < 0 || r >= map.rows) return neighbour;
+    neighbour.ranges = &level.ranges(r, 0);
+    neighbour.points = map.points.data() + std::size_t(r) * columns;
+    neighbour.shift = row_step == 0 ? 0 : level.alignedColumn(row, row_step, 0);
+    return neighbour;
+  };
+  const Row centre_row = rowAt(0), above = rowAt(-1), below = rowAt(1);
+  for (int column = 0; column < columns; ++column) {
+    const float centre_range = centre_row.ranges[std::ptrdiff_t(column) * range_step];
+    if (!isValidRange(centre_range)) {
+      normals[column] = kInvalid;
+      continue;
+    }
+    // LevelNeighbourhood::neighbour at one pixel's distance: the point, or
+    // null when missing; false across a depth discontinuity.
+    const float max_jump = level.jump_per_pixel * centre_range;
+    const auto neighbour = [&](const Row& at, int neighbour_column, const Eigen::Vector3f*& point) {
+      point = nullptr;
+      if (!at.ranges) return true;
+      neighbour_column = level.wrapColumn(neighbour_column + at.shift);
+      const float range = at.ranges[std::ptrdiff_t(neighbour_column) * range_step];
+      if (!isValidRange(range)) return true;
+      if (std::abs(range - centre_range) > max_jump) return false;
+      point = at.points + neighbour_column;
+      return true;
+    };
+    const Eigen::Vector3f& centre = centre_row.points[column];
+    const auto tangentOf = [&](const Eigen::Vector3f* after, const Eigen::Vector3f* before, Eigen::Vector3f& out) {
+      if (after && before)
+        out = *after - *before;
+      else if (after)
+        out = *after - centre;
+      else if (before)
+        out = centre - *before;
+      else
+        return false;
+      return true;
+    };
+    const Eigen::Vector3f *right, *left, *down, *up;
+    Eigen::Vector3f along_row, along_column;
+    if (!neighbour(centre_row, column + 1, right) || !neighbour(centre_row, column - 1, left) ||
+        !tangentOf(right, left, along_row) || !neighbour(below, column, down) || !neighbour(above, column, up) ||
+        !tangentOf(down, up, along_column)) {
+      normals[column] = kInvalid;
+      continue;
+    }
+    const Eigen::Vector3f normal = along_row.cross(along_column);
+    const float norm = normal.norm();
+    // Nearly parallel tangents (a surface seen edge-on) have no reliable normal.
+    normals[column] = norm > 1e-3f * along_row.norm() * along_column.norm() ? facingSensor(normal / norm, centre)
+                                                                            : kInvalid;
   }
-  return true;
-}
-
-Eigen::Vector3f crossProductNormal(const LevelNeighbourhood& level, int row, int column, float centre_range) {
-  Eigen::Vector3f along_row, along_column;
-  if (!tangent(level, row, column, 0, 1, centre_range, along_row) ||
-      !tangent(level, row, column, 1, 0, centre_range, along_column)) {
-    return kInvalid;
-  }
-  const Eigen::Vector3f normal = along_row.cross(along_column);
-  const float norm = normal.norm();
-  // Nearly parallel tangents (a surface seen edge-on) have no reliable normal.
-  if (!(norm > 1e-3f * along_row.norm() * along_column.norm())) return kInvalid;
-  return facingSensor(normal / norm, level.map.points[std::size_t(row) * level.map.columns + column]);
 }
 
 Eigen::Vector3f covarianceNormal(const LevelNeighbourhood& level, int row, int column, float centre_range,
@@ -207,16 +245,15 @@ void computeVertexNormalMap(const RangeImage& image, int stride, const NormalMap
   const LevelNeighbourhood level{out, view, options.max_range_jump_ratio * float(stride), radius, row_shifts};
   tbb::parallel_for(tbb::blocked_range<int>(0, out.rows), [&](const tbb::blocked_range<int>& rows) {
     for (int row = rows.begin(); row != rows.end(); ++row) {
+      if (options.method == NormalMethod::kCrossProduct) {
+        crossProductNormalsOfRow(level, row, out.normals.data() + std::size_t(row) * out.columns);
+        continue;
+      }
       for (int column = 0; column < out.columns; ++column) {
         const std::size_t i = std::size_t(row) * out.columns + column;
         const float range = view(row, column);
-        if (!isValidRange(range)) {
-          out.normals[i] = kInvalid;
-          continue;
-        }
-        out.normals[i] = options.method == NormalMethod::kCrossProduct
-                             ? crossProductNormal(level, row, column, range)
-                             : covarianceNormal(level, row, column, range, options.window_radius);
+        out.normals[i] = isValidRange(range) ? covarianceNormal(level, row, column, range, options.window_radius)
+                                             : kInvalid;
       }
     }
   });

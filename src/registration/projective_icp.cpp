@@ -1,5 +1,7 @@
 #include "range_image_mapping/registration/projective_icp.h"
 
+#include "range_image_mapping/lidar_intrinsics.h"
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
@@ -33,24 +35,38 @@ struct ChunkPairs {
   alignas(32) float rows[kRows][kProjectionChunk];
   std::size_t count = 0;
 
-  // sum_k a[k] b[k] * c[k] (c may be null: 1) over the padded chunk, in
-  // kLanes float partial sums: at most kProjectionChunk / kLanes terms each,
-  // so float stays exact to about 1e-6 of the chunk's sum, far below what
-  // the solve resolves; the chunks are then summed in double.
-  double sum(const float* a, const float* b, const float* c) const {
-    float lanes[kLanes] = {};
-    const std::size_t padded = (count + kLanes - 1) / kLanes * kLanes;
-    for (std::size_t k = 0; k < padded; k += kLanes)
-      for (std::size_t l = 0; l < kLanes; ++l) lanes[l] += a[k + l] * b[k + l] * (c ? c[k + l] : 1.0f);
-    double total = 0.0;
-    for (float lane : lanes) total += lane;
-    return total;
-  }
   void pad() {
     const std::size_t padded = (count + kLanes - 1) / kLanes * kLanes;
     for (auto& row : rows) std::fill(row + count, row + padded, 0.0f);
   }
 };
+
+// The 21 hessian entries (upper triangle, row by row), 6 gradient entries and
+// the squared residuals of one padded chunk: sum_k a[k] b[k] * c[k] in kLanes
+// float partial sums each, at most kProjectionChunk / kLanes terms, so float
+// stays exact to about 1e-6 of the chunk's sum, far below what the solve
+// resolves (the chunks are then summed in double). Cloned for AVX2: the
+// eight lanes in one register instead of two, the same sums (no FMA, each
+// lane adds in the same order).
+constexpr std::size_t kChunkSums = 28;
+RANGE_IMAGE_MAPPING_AVX2_CLONES
+void chunkSums(const float (*rows)[kProjectionChunk], std::size_t padded, double* sums) {
+  const auto sum = [padded](const float* a, const float* b, const float* c) {
+    float lanes[kLanes] = {};
+    for (std::size_t k = 0; k < padded; k += kLanes)
+      for (std::size_t l = 0; l < kLanes; ++l) lanes[l] += a[k + l] * b[k + l] * (c ? c[k + l] : 1.0f);
+    double total = 0.0;
+    for (float lane : lanes) total += lane;
+    return total;
+  };
+  const float* weights = rows[ChunkPairs::kWeight];
+  const float* residuals = rows[ChunkPairs::kResidual];
+  std::size_t out = 0;
+  for (int i = 0; i < 6; ++i)
+    for (int j = i; j < 6; ++j) sums[out++] = sum(rows[i], rows[j], weights);
+  for (int i = 0; i < 6; ++i) sums[out++] = sum(rows[i], residuals, weights);
+  sums[out] = sum(residuals, residuals, nullptr);
+}
 
 // Normal equations of one Gauss-Newton step, summed per thread and joined.
 // The hessian is kept as its 21 upper-triangle entries (row by row).
@@ -70,14 +86,11 @@ struct NormalEquations {
   void add(ChunkPairs& pairs) {
     if (pairs.count == 0) return;
     pairs.pad();
-    const float* weights = pairs.rows[ChunkPairs::kWeight];
-    const float* residuals = pairs.rows[ChunkPairs::kResidual];
-    std::size_t k = 0;
-    for (int i = 0; i < 6; ++i) {
-      for (int j = i; j < 6; ++j) hessian_upper[k++] += pairs.sum(pairs.rows[i], pairs.rows[j], weights);
-      gradient(i) += pairs.sum(pairs.rows[i], residuals, weights);
-    }
-    squared_residuals += pairs.sum(residuals, residuals, nullptr);
+    double sums[kChunkSums];
+    chunkSums(pairs.rows, (pairs.count + kLanes - 1) / kLanes * kLanes, sums);
+    for (std::size_t k = 0; k < hessian_upper.size(); ++k) hessian_upper[k] += sums[k];
+    for (int i = 0; i < 6; ++i) gradient(i) += sums[hessian_upper.size() + i];
+    squared_residuals += sums[kChunkSums - 1];
     inliers += pairs.count;
   }
   Matrix6d hessian() const {
