@@ -11,6 +11,7 @@
 
 #include <array>
 #include <cstdint>
+#include <cstring>
 #include <memory>
 #include <optional>
 #include <stdexcept>
@@ -27,6 +28,17 @@
 #endif
 
 namespace range_image_mapping {
+
+// value where keep is 1, +0.0f where it is 0 (a NaN value too), with a bit
+// mask: the vectoriser takes it where it does not take a select on a float
+// that may be NaN.
+inline float zeroUnless(float value, int keep) {
+  int32_t bits;
+  std::memcpy(&bits, &value, sizeof bits);
+  bits &= -keep;
+  std::memcpy(&value, &bits, sizeof value);
+  return value;
+}
 
 // Raised for intrinsics that cannot describe a sensor; the message names the field.
 class IntrinsicsError : public std::invalid_argument {

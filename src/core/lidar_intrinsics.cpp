@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 #include <limits>
 #include <numeric>
 #include <sstream>
@@ -286,17 +285,6 @@ inline int nearestColumn(float encoder_angle, float column_per_radian, float col
   u -= columns * static_cast<float>(u >= columns);
   const int column = static_cast<int>(u);
   return column - static_cast<int>(columns) * (column >= static_cast<int>(columns));  // seam
-}
-
-// value where keep is 1, +0.0f where it is 0 (a NaN value too), with a bit
-// mask: the vectoriser takes it where it does not take a select on a float
-// that may be NaN.
-inline float zeroUnless(float value, int keep) {
-  int32_t bits;
-  std::memcpy(&bits, &value, sizeof bits);
-  bits &= -keep;
-  std::memcpy(&value, &bits, sizeof value);
-  return value;
 }
 
 }  // namespace

@@ -27,13 +27,15 @@ constexpr std::size_t kProjectionChunk = 256;
 // Float lanes of the per-chunk sums: two SSE (one AVX) registers.
 constexpr std::size_t kLanes = 8;
 
-// One chunk's pairs as a structure of arrays (rows: the point-to-plane
+// One chunk's points as a structure of arrays (rows: the point-to-plane
 // jacobian [p x n, n], the weight, the residual), zero-padded to whole
-// lanes: every sum over the chunk is a loop the compiler vectorises.
+// lanes: every sum over the chunk is a loop the compiler vectorises. A point
+// without a pair has zero rows: it adds nothing to the sums.
 struct ChunkPairs {
   enum Row { kWeight = 6, kResidual = 7, kRows = 8 };
   alignas(32) float rows[kRows][kProjectionChunk];
-  std::size_t count = 0;
+  std::size_t count = 0;    // points in the chunk
+  std::size_t inliers = 0;  // of them with a pair
 
   void pad() {
     const std::size_t padded = (count + kLanes - 1) / kLanes * kLanes;
@@ -68,6 +70,80 @@ void chunkSums(const float (*rows)[kProjectionChunk], std::size_t padded, double
   sums[out] = sum(residuals, residuals, nullptr);
 }
 
+// A point and its normal (xyz) moved by transform [R | t] (a ColumnMotion's
+// 12 floats, column-major).
+inline void moveOne(const float* transform, const float* point, const float* normal, float* __restrict moved,
+                    float* __restrict moved_normal) {
+  for (int axis = 0; axis < 3; ++axis) {
+    moved[axis] = transform[axis] * point[0] + transform[3 + axis] * point[1] + transform[6 + axis] * point[2] +
+                  transform[9 + axis];
+    moved_normal[axis] =
+        transform[axis] * normal[0] + transform[3 + axis] * normal[1] + transform[6 + axis] * normal[2];
+  }
+}
+
+// Source points and normals (xyz triples) into the target frame: each by
+// the transform of its full-resolution column (per_column: the
+// target_from_source transform composed with the column's deskew motion),
+// else all by the first. Plain arrays (no Eigen type inside a clone) so
+// that it vectorises. Cloned for AVX2.
+constexpr int kTransformFloats = ColumnMotion::SizeAtCompileTime;
+RANGE_IMAGE_MAPPING_AVX2_CLONES
+void moveChunk(const float* points, const float* normals, const int* columns, std::size_t count,
+               const float* transforms, bool per_column, float* moved, float* moved_normals) {
+  if (per_column)
+    for (std::size_t k = 0; k < count; ++k)
+      moveOne(transforms + kTransformFloats * columns[k], points + 3 * k, normals + 3 * k, moved + 3 * k,
+              moved_normals + 3 * k);
+  else
+    for (std::size_t k = 0; k < count; ++k)
+      moveOne(transforms, points + 3 * k, normals + 3 * k, moved + 3 * k, moved_normals + 3 * k);
+}
+
+// A target level as plain arrays. levelPixelIndex is the sum of a row part
+// and a column part (pixel (0, r) and pixel (c, 0)): both are tabulated per
+// full-resolution row and column.
+struct TargetArrays {
+  const float* points;   // xyz triples
+  const float* normals;  // xyz triples, NaN where there is no normal
+  const int* row_start;  // full-resolution row -> its level row's first pixel
+  const int* column;     // full-resolution column -> level column
+};
+
+// Association (paper eq. 5) of one chunk and its point-to-plane rows, branch
+// free over plain arrays so that it vectorises: the target look-ups become
+// gathers, a rejected point gets zero rows (paired is an integer mask; every
+// comparison is false for a NaN target normal). moved and source_normals are
+// xyz triples. The rows must not overlap the inputs (restrict: gathers are
+// not vectorised past stores that may alias them). Cloned for AVX2. Returns
+// the number of pairs.
+RANGE_IMAGE_MAPPING_AVX2_CLONES
+std::size_t pairRows(const float* moved, const float* source_normals, const ProjectedPixel* pixels,
+                     const uint8_t* hits, std::size_t count, const TargetArrays& target,
+                     float max_distance_squared, float min_cosine, float (*__restrict rows)[kProjectionChunk]) {
+  std::size_t inliers = 0;
+  for (std::size_t k = 0; k < count; ++k) {
+    const int hit = hits[k];
+    // Pixel 0 where there is no hit; 32-bit indices, as a gather takes them.
+    const int t = 3 * (target.row_start[pixels[k].row & -hit] + target.column[pixels[k].column & -hit]);
+    const float* p = moved + 3 * k;
+    const float* m = source_normals + 3 * k;
+    const float nx = target.normals[t], ny = target.normals[t + 1], nz = target.normals[t + 2];
+    const float dx = p[0] - target.points[t], dy = p[1] - target.points[t + 1], dz = p[2] - target.points[t + 2];
+    const int paired = hit & int(dx * dx + dy * dy + dz * dz <= max_distance_squared) &
+                       int(m[0] * nx + m[1] * ny + m[2] * nz >= min_cosine);
+    rows[0][k] = zeroUnless(p[1] * nz - p[2] * ny, paired);  // p x n
+    rows[1][k] = zeroUnless(p[2] * nx - p[0] * nz, paired);
+    rows[2][k] = zeroUnless(p[0] * ny - p[1] * nx, paired);
+    rows[3][k] = zeroUnless(nx, paired);
+    rows[4][k] = zeroUnless(ny, paired);
+    rows[5][k] = zeroUnless(nz, paired);
+    rows[ChunkPairs::kResidual][k] = zeroUnless(nx * dx + ny * dy + nz * dz, paired);
+    inliers += std::size_t(paired);
+  }
+  return inliers;
+}
+
 // Normal equations of one Gauss-Newton step, summed per thread and joined.
 // The hessian is kept as its 21 upper-triangle entries (row by row).
 struct NormalEquations {
@@ -84,14 +160,14 @@ struct NormalEquations {
   }
   // J^T W J += sum_k w_k J_k J_k^T; J^T W r += sum_k w_k r_k J_k (paper eq. 6).
   void add(ChunkPairs& pairs) {
-    if (pairs.count == 0) return;
+    if (pairs.inliers == 0) return;
     pairs.pad();
     double sums[kChunkSums];
     chunkSums(pairs.rows, (pairs.count + kLanes - 1) / kLanes * kLanes, sums);
     for (std::size_t k = 0; k < hessian_upper.size(); ++k) hessian_upper[k] += sums[k];
     for (int i = 0; i < 6; ++i) gradient(i) += sums[hessian_upper.size() + i];
     squared_residuals += sums[kChunkSums - 1];
-    inliers += pairs.count;
+    inliers += pairs.inliers;
   }
   Matrix6d hessian() const {
     Matrix6d full;
@@ -134,64 +210,41 @@ class KernelWeight {
   double alpha_, inverse_scale_squared_, inverse_alpha_distance_;
 };
 
-// Where each source point goes in the target frame: one rigid transform,
-// or one per full-resolution column (the target_from_source transform
-// composed with the column's deskew motion).
-struct RigidMotion {
-  Eigen::Matrix3f rotation;
-  Eigen::Vector3f translation;
-  const Eigen::Matrix3f& rotationOf(int /*column*/) const { return rotation; }
-  Eigen::Vector3f move(const Eigen::Vector3f& point, int /*column*/) const { return rotation * point + translation; }
-};
-struct PerColumnMotion {
-  const ColumnMotion* transforms;
-  Eigen::Matrix3f rotationOf(int column) const { return transforms[column].leftCols<3>(); }
-  Eigen::Vector3f move(const Eigen::Vector3f& point, int column) const {
-    return transforms[column].leftCols<3>() * point + transforms[column].col(3);
-  }
-};
-
 // Pairs of one iteration (paper eq. 5-6) and their point-to-plane normal
-// equations, in one parallel pass over the source points.
-template <typename Motion>
+// equations, in one parallel pass over the source points (moved by the
+// transforms as moveChunk moves them).
 NormalEquations accumulate(const std::vector<Eigen::Vector3f>& points, const std::vector<Eigen::Vector3f>& normals,
-                           const std::vector<int>& columns, const Motion& motion, const LidarModel& target_model,
-                           const VertexNormalMap& target, const RegistrationOptions& options, double gate_m) {
+                           const std::vector<int>& columns, const ColumnMotion* transforms, bool per_column,
+                           const LidarModel& target_model, const VertexNormalMap& target,
+                           const RegistrationOptions& options, double gate_m) {
   const float max_distance_squared = float(gate_m * gate_m);
   const float min_cosine = float(options.min_normal_cosine);
   const KernelWeight weight_of(options.kernel);
+  std::vector<int> level_row_start(std::size_t(target_model.rows()));
+  std::vector<int> level_column(std::size_t(target_model.columns()));
+  for (int row = 0; row < target_model.rows(); ++row)
+    level_row_start[row] = int(levelPixelIndex(target, ProjectedPixel{0, row}));
+  for (int column = 0; column < target_model.columns(); ++column)
+    level_column[column] = int(levelPixelIndex(target, ProjectedPixel{column, 0}));
+  const TargetArrays target_arrays{target.points.data()->data(), target.normals.data()->data(),
+                                   level_row_start.data(), level_column.data()};
 
   return tbb::parallel_reduce(
       tbb::blocked_range<std::size_t>(0, points.size(), 2048), NormalEquations{},
       [&](const tbb::blocked_range<std::size_t>& block, NormalEquations sum) {
-        std::array<Eigen::Vector3f, kProjectionChunk> moved;
+        std::array<Eigen::Vector3f, kProjectionChunk> moved, source_normals;
         std::array<ProjectedPixel, kProjectionChunk> pixels;
         std::array<uint8_t, kProjectionChunk> hits;
         ChunkPairs pairs;
         for (std::size_t first = block.begin(); first < block.end(); first += kProjectionChunk) {
           const std::size_t count = std::min(kProjectionChunk, block.end() - first);
-          for (std::size_t k = 0; k < count; ++k) moved[k] = motion.move(points[first + k], columns[first + k]);
+          moveChunk(points[first].data(), normals[first].data(), &columns[first], count, transforms->data(),
+                    per_column, moved.data()->data(), source_normals.data()->data());
           target_model.projectMany(moved.data(), count, pixels.data(), hits.data());
-          // Association first, then the arithmetic on the pairs found: the
-          // weights' square roots and the sums vectorise.
-          pairs.count = 0;
-          for (std::size_t k = 0; k < count; ++k) {
-            if (!hits[k]) continue;
-            const std::size_t t = levelPixelIndex(target, pixels[k]);
-            const Eigen::Vector3f& target_normal = target.normals[t];
-            if (!std::isfinite(target_normal.x())) continue;
-            const Eigen::Vector3f difference = moved[k] - target.points[t];
-            if (!(difference.squaredNorm() <= max_distance_squared)) continue;
-            const Eigen::Vector3f source_normal = motion.rotationOf(columns[first + k]) * normals[first + k];
-            if (!(source_normal.dot(target_normal) >= min_cosine)) continue;
-            const Eigen::Vector3f moment = moved[k].cross(target_normal);
-            const std::size_t n = pairs.count++;
-            for (int axis = 0; axis < 3; ++axis) {
-              pairs.rows[axis][n] = moment(axis);
-              pairs.rows[3 + axis][n] = target_normal(axis);
-            }
-            pairs.rows[ChunkPairs::kResidual][n] = target_normal.dot(difference);
-          }
+          // Association and rows, then the weights' square roots and the sums.
+          pairs.count = count;
+          pairs.inliers = pairRows(moved.data()->data(), source_normals.data()->data(), pixels.data(), hits.data(),
+                                   count, target_arrays, max_distance_squared, min_cosine, pairs.rows);
           weight_of.weights(pairs.rows[ChunkPairs::kResidual], pairs.count, pairs.rows[ChunkPairs::kWeight]);
           sum.add(pairs);
         }
@@ -419,15 +472,17 @@ RegistrationResult ProjectiveIcp::alignSource(const Eigen::Isometry3d& initial_t
       const Eigen::Matrix3f rotation = result.target_from_source.linear().cast<float>();
       const Eigen::Vector3f translation = result.target_from_source.translation().cast<float>();
       if (column_motion.empty()) {
-        last = accumulate(source.points, source.normals, source.columns, RigidMotion{rotation, translation},
-                          *target_model_, target_levels_[level], options_, gate_m);
+        ColumnMotion rigid;
+        rigid << rotation, translation;
+        last = accumulate(source.points, source.normals, source.columns, &rigid, false, *target_model_,
+                          target_levels_[level], options_, gate_m);
       } else {
         column_transforms_.resize(column_motion.size());
         for (std::size_t u = 0; u < column_motion.size(); ++u) {
           column_transforms_[u].leftCols<3>() = rotation * column_motion[u].leftCols<3>();
           column_transforms_[u].col(3) = rotation * column_motion[u].col(3) + translation;
         }
-        last = accumulate(source.points, source.normals, source.columns, PerColumnMotion{column_transforms_.data()},
+        last = accumulate(source.points, source.normals, source.columns, column_transforms_.data(), true,
                           *target_model_, target_levels_[level], options_, gate_m);
       }
       ++result.iterations;
