@@ -73,7 +73,8 @@ struct TsdfIntegratorOptions {
   // still fades, over a few scans (a surface sample's weight is 0.1-1 with
   // incidence weighting). 1 = every sample alike (the paper's eq. 10).
   // Measured (mapping_benchmark, 30 scans): recall at 3 voxels 0.9943 ->
-  // 0.998 indoors, 0.985 -> 0.992 outdoors.
+  // 0.998 indoors, 0.9915 -> 0.9925 outdoors; lb_n3 mesh within 30 cm of
+  // the reference map 93.7 -> 98.1 %.
   float free_space_weight = 0.1f;
   // Incremental meshing (MeshExtractor re-meshes blocks whose
   // changed_generation is new): a block is marked only when the scan changed
