@@ -47,14 +47,19 @@ struct LevelNeighbourhood {
   // no point there, or across a depth discontinuity. Found once per
   // neighbour: its range decides, its point is then read by index.
   static constexpr std::ptrdiff_t kMissing = -1, kAcrossEdge = -2;
+  // What a neighbour's range says, given the largest jump allowed at its
+  // distance: kMissing, kAcrossEdge, or 0 (usable).
+  static std::ptrdiff_t classify(float range, float centre_range, float max_jump) {
+    if (!isValidRange(range)) return kMissing;
+    return std::abs(range - centre_range) > max_jump ? kAcrossEdge : 0;
+  }
   std::ptrdiff_t neighbour(int row, int row_step, int column, float centre_range, int pixel_distance) const {
     const int neighbour_row = row + row_step;
     if (neighbour_row < 0 || neighbour_row >= map.rows) return kMissing;
     const int neighbour_column = wrapColumn(alignedColumn(row, row_step, column));
-    const float range = ranges(neighbour_row, neighbour_column);
-    if (!isValidRange(range)) return kMissing;
-    if (std::abs(range - centre_range) > jump_per_pixel * pixel_distance * centre_range) return kAcrossEdge;
-    return std::ptrdiff_t(neighbour_row) * map.columns + neighbour_column;
+    const std::ptrdiff_t kind = classify(ranges(neighbour_row, neighbour_column), centre_range,
+                                         jump_per_pixel * pixel_distance * centre_range);
+    return kind < 0 ? kind : std::ptrdiff_t(neighbour_row) * map.columns + neighbour_column;
   }
 };
 
@@ -97,17 +102,17 @@ void crossProductNormalsOfRow(const LevelNeighbourhood& level, int row, Eigen::V
       normals[column] = kInvalid;
       continue;
     }
-    // LevelNeighbourhood::neighbour at one pixel's distance: the point, or
-    // null when missing; false across a depth discontinuity.
+    // LevelNeighbourhood::neighbour at one pixel's distance, from the cached
+    // rows: the point, or null when missing; false across a depth discontinuity.
     const float max_jump = level.jump_per_pixel * centre_range;
     const auto neighbour = [&](const Row& at, int neighbour_column, const Eigen::Vector3f*& point) {
       point = nullptr;
       if (!at.ranges) return true;
       neighbour_column = level.wrapColumn(neighbour_column + at.shift);
-      const float range = at.ranges[std::ptrdiff_t(neighbour_column) * range_step];
-      if (!isValidRange(range)) return true;
-      if (std::abs(range - centre_range) > max_jump) return false;
-      point = at.points + neighbour_column;
+      const std::ptrdiff_t kind = LevelNeighbourhood::classify(
+          at.ranges[std::ptrdiff_t(neighbour_column) * range_step], centre_range, max_jump);
+      if (kind == LevelNeighbourhood::kAcrossEdge) return false;
+      if (kind == 0) point = at.points + neighbour_column;
       return true;
     };
     const Eigen::Vector3f& centre = centre_row.points[column];

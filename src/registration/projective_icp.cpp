@@ -215,19 +215,11 @@ class KernelWeight {
 // transforms as moveChunk moves them).
 NormalEquations accumulate(const std::vector<Eigen::Vector3f>& points, const std::vector<Eigen::Vector3f>& normals,
                            const std::vector<int>& columns, const ColumnMotion* transforms, bool per_column,
-                           const LidarModel& target_model, const VertexNormalMap& target,
+                           const LidarModel& target_model, const TargetArrays& target_arrays,
                            const RegistrationOptions& options, double gate_m) {
   const float max_distance_squared = float(gate_m * gate_m);
   const float min_cosine = float(options.min_normal_cosine);
   const KernelWeight weight_of(options.kernel);
-  std::vector<int> level_row_start(std::size_t(target_model.rows()));
-  std::vector<int> level_column(std::size_t(target_model.columns()));
-  for (int row = 0; row < target_model.rows(); ++row)
-    level_row_start[row] = int(levelPixelIndex(target, ProjectedPixel{0, row}));
-  for (int column = 0; column < target_model.columns(); ++column)
-    level_column[column] = int(levelPixelIndex(target, ProjectedPixel{column, 0}));
-  const TargetArrays target_arrays{target.points.data()->data(), target.normals.data()->data(),
-                                   level_row_start.data(), level_column.data()};
 
   return tbb::parallel_reduce(
       tbb::blocked_range<std::size_t>(0, points.size(), 2048), NormalEquations{},
@@ -304,7 +296,9 @@ void validateOptions(const RegistrationOptions& options) {
     if (options.iterations[k] < 0) fail("iterations[" + std::to_string(k) + "] must be >= 0");
   }
   if (options.source_stride < 1) fail("source_stride must be >= 1");
-  if (!(options.max_correspondence_distance_m > 0.0)) fail("max_correspondence_distance_m must be positive");
+  if (!(options.max_correspondence_distance_m >= 0.0)) {
+    fail("max_correspondence_distance_m must be >= 0 (0: twice the kernel scale)");
+  }
   if (!(options.min_normal_cosine >= -1.0 && options.min_normal_cosine <= 1.0)) {
     fail("min_normal_cosine must be within [-1, 1]");
   }
@@ -329,7 +323,7 @@ void ProjectiveIcp::setTarget(const RangeImage& target) {
   for (std::size_t level = 0; level < options_.strides.size(); ++level) {
     computeVertexNormalMap(target, options_.strides[level], options_.normals, target_levels_[level]);
   }
-  target_model_ = target.model;
+  setTargetModel(target.model);
 }
 
 void ProjectiveIcp::setTarget(const RangeImage& target, const VertexNormalMap& full_resolution) {
@@ -352,7 +346,21 @@ void ProjectiveIcp::setTarget(const RangeImage& target, const VertexNormalMap& f
     else
       computeVertexNormalMap(target, options_.strides[level], options_.normals, target_levels_[level]);
   }
-  target_model_ = target.model;
+  setTargetModel(target.model);
+}
+
+void ProjectiveIcp::setTargetModel(const LidarModelConstPtr& model) {
+  target_index_tables_.resize(target_levels_.size());
+  for (std::size_t level = 0; level < target_levels_.size(); ++level) {
+    LevelIndexTables& tables = target_index_tables_[level];
+    tables.row_start.resize(std::size_t(model->rows()));
+    tables.column.resize(std::size_t(model->columns()));
+    for (int row = 0; row < model->rows(); ++row)
+      tables.row_start[row] = int(levelPixelIndex(target_levels_[level], ProjectedPixel{0, row}));
+    for (int column = 0; column < model->columns(); ++column)
+      tables.column[column] = int(levelPixelIndex(target_levels_[level], ProjectedPixel{column, 0}));
+  }
+  target_model_ = model;
 }
 
 RegistrationResult ProjectiveIcp::align(const RangeImage& source,
@@ -463,11 +471,15 @@ RegistrationResult ProjectiveIcp::alignSource(const Eigen::Isometry3d& initial_t
     const int iterations = schedule.max_iterations > 0 ? std::min(schedule.max_iterations, options_.iterations[level])
                                                        : options_.iterations[level];
     // Pairs further apart than the gate are not the same surface: at full
-    // resolution that is max_correspondence_distance_m; a coarse level has
-    // to capture the motion the finer ones cannot, and its pixels are s
-    // times as far apart, so it accepts s times as far.
-    const double gate_m = options_.max_correspondence_distance_m *
+    // resolution that is correspondenceDistance(); a coarse level has to
+    // capture the motion the finer ones cannot, and its pixels are s times
+    // as far apart, so it accepts s times as far.
+    const double gate_m = options_.correspondenceDistance() *
                           (options_.gate_grows_with_stride ? double(options_.strides[level]) : 1.0);
+    const VertexNormalMap& target = target_levels_[level];
+    const TargetArrays target_arrays{target.points.data()->data(), target.normals.data()->data(),
+                                     target_index_tables_[level].row_start.data(),
+                                     target_index_tables_[level].column.data()};
     for (int iteration = 0; iteration < iterations; ++iteration) {
       const Eigen::Matrix3f rotation = result.target_from_source.linear().cast<float>();
       const Eigen::Vector3f translation = result.target_from_source.translation().cast<float>();
@@ -475,7 +487,7 @@ RegistrationResult ProjectiveIcp::alignSource(const Eigen::Isometry3d& initial_t
         ColumnMotion rigid;
         rigid << rotation, translation;
         last = accumulate(source.points, source.normals, source.columns, &rigid, false, *target_model_,
-                          target_levels_[level], options_, gate_m);
+                          target_arrays, options_, gate_m);
       } else {
         column_transforms_.resize(column_motion.size());
         for (std::size_t u = 0; u < column_motion.size(); ++u) {
@@ -483,7 +495,7 @@ RegistrationResult ProjectiveIcp::alignSource(const Eigen::Isometry3d& initial_t
           column_transforms_[u].col(3) = rotation * column_motion[u].col(3) + translation;
         }
         last = accumulate(source.points, source.normals, source.columns, column_transforms_.data(), true,
-                          *target_model_, target_levels_[level], options_, gate_m);
+                          *target_model_, target_arrays, options_, gate_m);
       }
       ++result.iterations;
       if (last.inliers < 6) break;  // nothing to solve for; the pose stays

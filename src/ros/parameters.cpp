@@ -204,7 +204,7 @@ registration::RegistrationOptions readRegistrationOptions(const ParameterReader&
                          ": one per level");
   options.source_stride = reader.getInt("source_stride", defaults.source_stride, 1, 64);
   options.max_correspondence_distance_m = reader.getDouble(
-      "max_correspondence_distance", defaults.max_correspondence_distance_m, 1e-3, 100.0);
+      "max_correspondence_distance", defaults.max_correspondence_distance_m, 0.0, 100.0);
   options.gate_grows_with_stride = reader.getBool("gate_grows_with_stride", defaults.gate_grows_with_stride);
   options.min_normal_cosine = reader.getDouble("min_normal_cosine", defaults.min_normal_cosine, -1.0, 1.0);
   options.kernel.type = reader.getChoice("kernel", "pseudo_huber", {"pseudo_huber", "barron"}) == "barron"

@@ -38,11 +38,7 @@ registration::OdometryOptions OdometryCommandLine::options() const {
   options.deskew = !no_deskew;
   options.deskew_passes = deskew_passes;
   options.registration.kernel.scale_m = kernel_scale_m;
-  // The gate at full resolution scales with the kernel: 1 m outdoors (0.5 m
-  // kernel), 0.4 m indoors (0.2 m), where a wider gate admits pairs across
-  // doorways that bias the pose (pairwise_registration_benchmark).
-  options.registration.max_correspondence_distance_m =
-      max_correspondence_distance_m > 0.0 ? max_correspondence_distance_m : 2.0 * kernel_scale_m;
+  options.registration.max_correspondence_distance_m = max_correspondence_distance_m;
   options.keyframe_distance_m = keyframe_distance_m;
   options.keyframe_angle_rad = keyframe_angle_deg * M_PI / 180.0;
   return options;
@@ -53,7 +49,7 @@ Json::Value OdometryCommandLine::json() const {
   json["deskew"] = !no_deskew;
   json["deskew_passes"] = deskew_passes;
   json["kernel_scale_m"] = kernel_scale_m;
-  json["max_correspondence_distance_m"] = options().registration.max_correspondence_distance_m;
+  json["max_correspondence_distance_m"] = options().registration.correspondenceDistance();
   json["keyframe_distance_m"] = keyframe_distance_m;
   json["keyframe_angle_deg"] = keyframe_angle_deg;
   return json;

@@ -28,7 +28,7 @@ struct OdometryCommandLine {
   bool no_deskew = false;
   int deskew_passes = registration::OdometryOptions().deskew_passes;
   double kernel_scale_m = 0.5;
-  double max_correspondence_distance_m = 0.0;  // 0: twice the kernel scale
+  double max_correspondence_distance_m = registration::RegistrationOptions().max_correspondence_distance_m;
   double keyframe_distance_m = 0.0;
   double keyframe_angle_deg = 0.0;
   registration::OdometryOptions options() const;

@@ -28,7 +28,11 @@ struct RegistrationOptions {
   std::vector<int> strides{4, 2, 1};        // pyramid levels, coarse to fine
   std::vector<int> iterations{20, 20, 10};  // Gauss-Newton iterations per level (paper)
   int source_stride = 1;                    // extra subsampling of the source at every level
-  double max_correspondence_distance_m = 1.0;  // pairs further apart are rejected (full resolution)
+  // Pairs further apart are rejected (full resolution); 0: twice the kernel
+  // scale, 1 m outdoors and 0.4 m indoors with the paper's kernels. A gate
+  // that does not shrink with the kernel admits, indoors, pairs across
+  // doorways that bias the pose (pairwise_registration_benchmark).
+  double max_correspondence_distance_m = 0.0;
   // A level of stride s accepts pairs s times as far apart: the coarse
   // levels capture motions beyond the gate (from an identity guess, scans
   // metres apart), the fine ones reject outliers.
@@ -41,6 +45,10 @@ struct RegistrationOptions {
   // Levels before the last stop when an update is below the thresholds times
   // this times their stride (they only seed the finer levels).
   double coarse_convergence_scale = 100.0;
+
+  double correspondenceDistance() const {
+    return max_correspondence_distance_m > 0.0 ? max_correspondence_distance_m : 2.0 * kernel.scale_m;
+  }
 };
 
 struct RegistrationResult {
@@ -130,10 +138,18 @@ class ProjectiveIcp {
     std::vector<int> columns;
   };
   void prepareSource(const VertexNormalMap& source) const;
+  // Per target level, levelPixelIndex split into a part per full-resolution
+  // row (its level row's first pixel) and one per column (its level
+  // column), so that association adds two looked-up integers.
+  struct LevelIndexTables {
+    std::vector<int> row_start, column;
+  };
+  void setTargetModel(const LidarModelConstPtr& model);
 
   RegistrationOptions options_;
   LidarModelConstPtr target_model_;
   std::vector<VertexNormalMap> target_levels_;  // one per options_.strides entry
+  std::vector<LevelIndexTables> target_index_tables_;  // one per options_.strides entry
   // Reused between calls (no per-frame allocation in steady state).
   mutable VertexNormalMap source_map_;
   mutable std::vector<SourceLevel> source_levels_;  // one per options_.strides entry
