@@ -281,7 +281,8 @@ GroundCoverage groundCoverage(const VoxelBlockGrid& grid, double tilt_rad) {
   return result;
 }
 
-GroundCoverage integrateGround(SignedDistance signed_distance, double noise_m, double tilt_rad) {
+GroundCoverage integrateGround(SignedDistance signed_distance, double noise_m, double tilt_rad,
+                               double plane_fill_m = 0.0) {
   const TriangleMesh ground = simulation::makeQuad(Eigen::Vector3f(-60, -60, 0), Eigen::Vector3f(120, 0, 0),
                                                    Eigen::Vector3f(0, 120, 0));
   simulation::TriangleMesh sloped = ground;
@@ -299,6 +300,7 @@ GroundCoverage integrateGround(SignedDistance signed_distance, double noise_m, d
   VoxelBlockGrid grid(gridOptions());
   TsdfIntegratorOptions options;
   options.signed_distance = signed_distance;
+  options.plane_fill_m = plane_fill_m;
   TsdfIntegrator integrator(options);
   integrator.integrate(grid, image, scan_pose);
   return groundCoverage(grid, tilt_rad);
@@ -312,26 +314,39 @@ void printGround(const char* what, const GroundCoverage& ground) {
   std::printf("\n");
 }
 
-// Point-to-plane distances (the default) mesh the whole ground to 25 m,
-// within millimetres; eq. 9 along the ray leaves rings with gaps beyond 5 m.
+// Point-to-plane distances with the plane filling the gaps between beam
+// rings mesh the whole ground to 25 m, within millimetres; eq. 9 along the
+// ray leaves rings with gaps beyond 5 m. With the default plane fill (the
+// truncation) the plane covers the ground within the truncation of a
+// return: whole where the rings are close, rings with narrower gaps than
+// eq. 9's where they are far apart.
 TEST(TsdfIntegrator, GroundAtGrazingIncidenceIsCoveredByPointToPlaneDistances) {
-  const double tilt = 1.0 * kDegree;
+  const double tilt = 1.0 * kDegree, fill_gaps = 100.0;
   std::printf("ground distance            |   0-5 m covered, mean/max error mm | 5-10 | 10-15 | 15-20 | 20-25 | 25-30\n");
+  const GroundCoverage filled = integrateGround(SignedDistance::kPointToPlane, 0.0, tilt, fill_gaps);
+  const GroundCoverage noisy_filled = integrateGround(SignedDistance::kPointToPlane, 0.01, tilt, fill_gaps);
   const GroundCoverage plane = integrateGround(SignedDistance::kPointToPlane, 0.0, tilt);
   const GroundCoverage along_ray = integrateGround(SignedDistance::kAlongRay, 0.0, tilt);
-  const GroundCoverage noisy_plane = integrateGround(SignedDistance::kPointToPlane, 0.01, tilt);
-  printGround("point-to-plane", plane);
+  printGround("point-to-plane, gaps filled", filled);
+  printGround("  the same, 1 cm noise", noisy_filled);
+  printGround("point-to-plane (default)", plane);
   printGround("along the ray (eq. 9)", along_ray);
-  printGround("point-to-plane, 1 cm noise", noisy_plane);
   // 5-25 m (beyond, the rings are more than 10 % of the range apart and the
   // normal map gives the ground no normal: eq. 9 there).
   for (std::size_t ring = 1; ring < 5; ++ring) {
-    EXPECT_GT(plane.covered[ring], 0.97) << "ring " << ring;
-    EXPECT_LT(plane.mean_error[ring], kVoxel / 100) << "ring " << ring;
-    EXPECT_GT(noisy_plane.covered[ring], 0.97) << "ring " << ring;
-    EXPECT_LT(noisy_plane.mean_error[ring], kVoxel / 20) << "ring " << ring;
+    EXPECT_GT(filled.covered[ring], 0.97) << "ring " << ring;
+    EXPECT_LT(filled.mean_error[ring], kVoxel / 100) << "ring " << ring;
+    EXPECT_GT(noisy_filled.covered[ring], 0.97) << "ring " << ring;
+    EXPECT_LT(noisy_filled.mean_error[ring], kVoxel / 20) << "ring " << ring;
     EXPECT_LT(along_ray.covered[ring], 0.7) << "ring " << ring;
+    EXPECT_GT(plane.covered[ring], along_ray.covered[ring] + 0.1) << "ring " << ring;
+    EXPECT_LT(plane.mean_error[ring], kVoxel / 100) << "ring " << ring;
   }
+  // Rings at most 0.34 m apart within 10 m: less than twice the truncation (0.6 m), whole.
+  EXPECT_GT(plane.covered[1], 0.97);
+  // Rings about 1 m apart and more beyond 15 m: gaps the plane does not fill.
+  EXPECT_LT(plane.covered[3], filled.covered[3] - 0.2);
+  EXPECT_LT(plane.covered[4], filled.covered[4] - 0.2);
 }
 
 TEST(TsdfIntegrator, FreeSpaceIsPositiveBehindIsNegativeAndFarBehindUntouched) {
@@ -521,6 +536,8 @@ TEST(TsdfIntegrator, BadInputThrowsAndLeavesTheGridBitIdentical) {
   withOptions([](TsdfIntegratorOptions& o) { o.mesh_min_weight = std::nanf(""); }, "mesh_min_weight");
   withOptions([](TsdfIntegratorOptions& o) { o.free_space_weight = 0.0f; }, "free_space_weight");
   withOptions([](TsdfIntegratorOptions& o) { o.free_space_weight = std::nanf(""); }, "free_space_weight");
+  withOptions([](TsdfIntegratorOptions& o) { o.plane_fill_m = -0.1; }, "plane_fill_m");
+  withOptions([](TsdfIntegratorOptions& o) { o.plane_fill_m = std::numeric_limits<double>::infinity(); }, "plane_fill_m");
   withOptions([](TsdfIntegratorOptions& o) { o.signed_distance = SignedDistance(7); }, "signed_distance");
   withOptions(
       [](TsdfIntegratorOptions& o) {

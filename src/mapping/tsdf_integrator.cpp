@@ -268,6 +268,9 @@ void TsdfIntegratorOptions::validate(const VoxelBlockGridOptions& grid) const {
                        numberText(mesh_tolerance_voxels));
   if (!(free_space_weight > 0.0f && free_space_weight <= 1.0f))
     throw MappingError("free_space_weight must be in (0, 1], got " + numberText(free_space_weight));
+  requireFiniteOption(plane_fill_m, "plane_fill_m");
+  if (plane_fill_m < 0.0)
+    throw MappingError("plane_fill_m must be >= 0 (0 = the truncation), got " + numberText(plane_fill_m));
   if (!(mesh_min_weight >= 0.0f) || !std::isfinite(mesh_min_weight))
     throw MappingError("mesh_min_weight must be >= 0 and finite, got " + numberText(mesh_min_weight));
 }
@@ -719,6 +722,8 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
   const PixelPlane* planes = point_to_plane ? work.pixel_planes.data() : nullptr;
   const Eigen::Vector3f* pixel_points = point_to_plane ? work.normals.points.data() : nullptr;
   const float plane_tolerance = float(kPlaneSeenToleranceVoxels * grid.voxelSize());
+  const float plane_fill = float(options_.planeFillFor(grid.options()));
+  const float plane_fill_squared = plane_fill * plane_fill;
   const float* ranges = scan.range.data();
   const float* intensities = with_intensity ? scan.intensity.data() : nullptr;
   const float* sample_weights = weighted ? work.sample_weight.data() : nullptr;
@@ -815,9 +820,12 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
             const PixelPlane& plane = planes[p];
             const float to_plane = plane.distance(frame_points[i]);
             // Farther along the ray the plane counts only where the image saw
-            // it under the voxel (not past an object's edge, into its shadow).
+            // it under the voxel (not past an object's edge, into its shadow),
+            // and within plane_fill of that return (not across wide gaps
+            // between beam rings).
             const std::size_t q = std::size_t(foot_pixels[n].row) * columns + foot_pixels[n].column;
-            if (foot_hits[n] && std::abs(plane.distance(pixel_points[q])) <= plane_tolerance) {
+            if (foot_hits[n] && std::abs(plane.distance(pixel_points[q])) <= plane_tolerance &&
+                (feet[n] - pixel_points[q]).squaredNorm() <= plane_fill_squared) {
               write(i, p, to_plane);  // (NaN for a pixel without a return fails the test)
               continue;
             }

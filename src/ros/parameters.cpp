@@ -296,6 +296,8 @@ MapperParameters readMapperParameters(const ros::NodeHandle& private_node) {
       reader.getBool("incidence_weighting", defaults.map.integrator.incidence_weighting);
   map.integrator.free_space_weight = static_cast<float>(
       reader.getDouble("free_space_weight", defaults.map.integrator.free_space_weight, -kAny, kAny));
+  map.integrator.plane_fill_m =
+      reader.getDouble("plane_fill", defaults.map.integrator.plane_fill_m, -kAny, kAny);
   map.integrator.signed_distance =
       reader.getChoice("signed_distance", "point_to_plane", {"point_to_plane", "along_ray"}) == "along_ray"
           ? mapping::SignedDistance::kAlongRay

@@ -39,6 +39,7 @@ TEST(MapperParameters, DefaultsWhenNothingIsSet) {
   EXPECT_EQ(parameters.map.integrator.signed_distance, core.integrator.signed_distance);
   EXPECT_EQ(parameters.map.integrator.mesh_tolerance_voxels, core.integrator.mesh_tolerance_voxels);
   EXPECT_EQ(parameters.map.integrator.free_space_weight, core.integrator.free_space_weight);
+  EXPECT_EQ(parameters.map.integrator.plane_fill_m, core.integrator.plane_fill_m);
   EXPECT_EQ(parameters.map.mesh.update_budget_s, core.mesh.update_budget_s);
   EXPECT_EQ(parameters.map.memory_radius_m, core.memory_radius_m);
   EXPECT_EQ(parameters.map.max_pose_jump_m, core.max_pose_jump_m);
@@ -66,7 +67,9 @@ TEST(MapperParameters, ValuesReachTheCoreOptions) {
   node.setParam("mesh_update_budget", 0.015);
   node.setParam("mesh_min_weight", 1.0);
   node.setParam("free_space_weight", 1.0);
+  node.setParam("plane_fill", 100.0);
   const MapperParameters parameters = readMapperParameters(node);
+  EXPECT_EQ(parameters.map.integrator.plane_fill_m, 100.0);
   EXPECT_EQ(parameters.map.integrator.free_space_weight, 1.0f);
   EXPECT_EQ(parameters.map.integrator.signed_distance, mapping::SignedDistance::kAlongRay);
   EXPECT_EQ(parameters.map.integrator.mesh_tolerance_voxels, 0.0);
