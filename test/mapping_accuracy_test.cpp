@@ -72,29 +72,31 @@ evaluation::SurfaceMetrics issueTargetRun(const test::MappingPreset& preset) {
 }
 
 TEST(MappingAccuracy, IndoorCartMeshReachesTheIssueTarget) {
-  EXPECT_GE(issueTargetRun(test::indoorCartPreset()).f_score, 0.98);
+  EXPECT_GE(issueTargetRun(test::indoorCartPreset()).f_score, 0.99);
 }
 
 // (0.954 with eq. 9 along the ray: recall 0.91, the far ground between beam
-// rings missing; point-to-plane distances: 0.975, recall 0.99.)
+// rings missing; point-to-plane distances: 0.975, recall 0.99, precision
+// 0.96 with the plane filling the gaps between far rings; 0.996 with the
+// plane within plane_fill of a return.)
 TEST(MappingAccuracy, OutdoorCarMeshReachesTheIssueTarget) {
-  EXPECT_GE(issueTargetRun(test::outdoorCarPreset()).f_score, 0.97);
+  EXPECT_GE(issueTargetRun(test::outdoorCarPreset()).f_score, 0.99);
 }
 
-// OctoMap on the same scans (4 scans, every 5th frame: OctoMap needs ~2 s of
-// one core per scan), same clip, same resolution, its default sensor model
-// (insertPointCloud, hit 0.7 / miss 0.4); its surface is the centres of its
-// occupied leaves. At the paper's 3 x voxel, against the issue's truth (the
-// scene within a voxel of a hit), OctoMap is near perfect by construction:
-// its occupied leaves are where the hits fell, and so is the truth. The TSDF
-// mesh also covers the surface between beam rings, where no hit fell: its
-// "misses" there are on the scene (precision against every surface near the
-// route, printed too). Finer thresholds show what each map knows of where
-// the surface is: a zero crossing within the voxel, a leaf centre within
-// half a voxel. Asserted: at 3 x voxel recall and precision against the
-// scene; at half a voxel F and the median accuracy beat OctoMap's.
+// OctoMap on the same scans (30 consecutive scans, as mapping_benchmark:
+// OctoMap needs 1-2 s of one core per scan), same clip, same resolution, its
+// default sensor model (insertPointCloud, hit 0.7 / miss 0.4); its surface
+// is the centres of its occupied leaves. Against the issue's truth (the
+// scene within a voxel of a hit) OctoMap's precision is 1 by construction:
+// its occupied leaves are where the hits fell, and so is the truth; its
+// recall falls as rays through leaves at grazing incidence clear them (on
+// fewer than ~10 scans it is still near 1, and higher than ours). Finer
+// thresholds show what each map knows of where the surface is: a zero
+// crossing within the voxel, a leaf centre within half a voxel. Asserted:
+// the paper's claim, a higher F at 3 x voxel, and at half a voxel F and
+// the median accuracy; precision against every surface near the route.
 void compareWithOctomap(const test::MappingPreset& preset) {
-  const test::SimulatedMappingSequence sequence = test::simulateMappingSequence(preset, 4, 5);
+  const test::SimulatedMappingSequence sequence = test::simulateMappingSequence(preset, 30, 1);
   const std::vector<Eigen::Vector3f> scene = test::sceneSurfaceNearRoute(preset, sequence);
   const std::vector<Eigen::Vector3f> ours = tsdfSurface(preset, sequence);
   const std::vector<Eigen::Vector3f> octomap = octomapSurface(preset, sequence);
@@ -120,8 +122,8 @@ void compareWithOctomap(const test::MappingPreset& preset) {
     printMetrics("OctoMap occupied centres", octomap_metrics);
     std::printf("  %-26s           P against the whole scene %.4f\n", "", octomap_on_scene);
     if (voxels == 3.0) {
-      EXPECT_GT(ours_metrics.recall, 0.98);
-      EXPECT_GT(ours_on_scene, 0.99);
+      EXPECT_GT(ours_metrics.f_score, octomap_metrics.f_score);
+      EXPECT_GT(ours_on_scene, 0.999);
     }
     if (voxels == 0.5) {
       EXPECT_GT(ours_metrics.f_score, octomap_metrics.f_score);
