@@ -23,7 +23,7 @@ packages=(
   librostest-dev libgtest-dev libbenchmark-dev
   libeigen3-dev libtbb-dev libjsoncpp-dev libpcap-dev libcli11-dev libpng-dev libssl-dev
   libnanoflann-dev libembree-dev robin-map-dev gnuplot-nox libpcl-dev clang liboctomap-dev
-  libstd-srvs-dev libdiagnostic-updater-dev libmessage-filters-dev
+  libstd-srvs-dev libdiagnostic-updater-dev libmessage-filters-dev libboost-dev
 )
 
 install_dependencies() {

@@ -198,6 +198,82 @@ TEST(OusterPacket, NestedMetadataCompleteAndPartialFrame) {
   EXPECT_EQ(statistics.batcher.missing_columns, 480u);
 }
 
+// Firmware 3.x packets end in a CRC64 of the packet (crc_test.pcap); 2.x
+// packets of the same profile do not (lb_n3), LEGACY ones have no footer.
+TEST(OusterPacket, ChecksumsMatchOnFirmware3PacketsOnly) {
+  RIM_REQUIRE_DATA(crc_pcap, "ouster-pcaps/crc_test.pcap");
+  RIM_REQUIRE_DATA(crc_metadata_path, "ouster-pcaps/crc_test.json");
+  RIM_REQUIRE_DATA(v2_pcap, "ouster-pcaps/OS-1-128_v2.3.0_1024x10_lb_n3.pcap");
+  RIM_REQUIRE_DATA(v2_metadata_path, "ouster-pcaps/OS-1-128_v2.3.0_1024x10.json");
+  RIM_REQUIRE_DATA(legacy_pcap, "ouster-pcaps/OS-1-32-G_v2.1.1_1024x10.pcap");
+  RIM_REQUIRE_DATA(legacy_metadata_path, "ouster-pcaps/OS-1-32-G_v2.1.1_1024x10.json");
+  const OusterMetadata crc_metadata = loadOusterMetadata(crc_metadata_path);
+  const PacketFormat crc_format(crc_metadata);
+  const std::vector<Packet> packets = lidarPackets(crc_pcap, crc_metadata);
+  ASSERT_EQ(packets.size(), 34u);
+  for (std::size_t i = 0; i < packets.size(); ++i) EXPECT_TRUE(crc_format.checksumMatches(packets[i].data())) << i;
+  // Any one bit changed anywhere (header, pixels, footer, the checksum itself) is caught.
+  for (const std::size_t byte : {std::size_t(2), std::size_t(1000), packets[0].size() - 9, packets[0].size() - 1}) {
+    Packet damaged = packets[5];
+    damaged[byte] ^= 0x10;
+    EXPECT_FALSE(crc_format.checksumMatches(damaged.data())) << "byte " << byte;
+  }
+  const OusterMetadata v2_metadata = loadOusterMetadata(v2_metadata_path);
+  for (const Packet& packet : lidarPackets(v2_pcap, v2_metadata))
+    EXPECT_FALSE(PacketFormat(v2_metadata).checksumMatches(packet.data()));
+  const OusterMetadata legacy_metadata = loadOusterMetadata(legacy_metadata_path);
+  for (const Packet& packet : lidarPackets(legacy_pcap, legacy_metadata))
+    EXPECT_FALSE(PacketFormat(legacy_metadata).checksumMatches(packet.data()));
+}
+
+// In a stream that carries checksums a damaged packet is dropped and counted
+// (its columns stay invalid, the rest of the frame is exact); in one that
+// does not (firmware 2.x), nothing is dropped for its checksum.
+TEST(OusterPacket, DamagedPacketOfAChecksummedStreamIsDropped) {
+  RIM_REQUIRE_DATA(crc_pcap, "ouster-pcaps/crc_test.pcap");
+  RIM_REQUIRE_DATA(crc_metadata_path, "ouster-pcaps/crc_test.json");
+  RIM_REQUIRE_DATA(v2_pcap, "ouster-pcaps/OS-1-128_v2.3.0_1024x10_lb_n3.pcap");
+  RIM_REQUIRE_DATA(v2_metadata_path, "ouster-pcaps/OS-1-128_v2.3.0_1024x10.json");
+  const auto batch = [](const OusterMetadata& metadata, const std::vector<Packet>& packets,
+                        BatcherStatistics& statistics) {
+    std::vector<LidarScan> scans;
+    ScanBatcher batcher(metadata, [&](const LidarScan& scan) { scans.push_back(scan); });
+    for (const Packet& packet : packets) batcher.addPacket(packet.data(), packet.size());
+    batcher.flush();
+    statistics = batcher.statistics();
+    return scans;
+  };
+  const OusterMetadata crc_metadata = loadOusterMetadata(crc_metadata_path);
+  std::vector<Packet> packets = lidarPackets(crc_pcap, crc_metadata);
+  BatcherStatistics intact_statistics, damaged_statistics;
+  const std::vector<LidarScan> intact = batch(crc_metadata, packets, intact_statistics);
+  EXPECT_EQ(intact_statistics.bad_checksum, 0u);
+  ASSERT_EQ(intact.size(), 2u);
+  EXPECT_EQ(md5Hex(intact[0].range), "a0119763b309d842c3d164d3a5e218d4");
+  // A range bit flipped in packet 7 (columns 112-127 of frame 254): without
+  // the checksum it would decode as a plausible wrong range.
+  const std::size_t first_pixel = 32 + 12;
+  packets[7][first_pixel] ^= 0x01;
+  const std::vector<LidarScan> damaged = batch(crc_metadata, packets, damaged_statistics);
+  EXPECT_EQ(damaged_statistics.bad_checksum, 1u);
+  ASSERT_EQ(damaged.size(), 2u);
+  EXPECT_EQ(damaged[0].receivedColumns(), 512u - 16u);
+  EXPECT_EQ(damaged_statistics.missing_columns, intact_statistics.missing_columns + 16);
+  const int columns = damaged[0].columns;
+  for (int row = 0; row < damaged[0].rows; ++row)
+    for (int column = 0; column < columns; ++column) {
+      const std::size_t i = std::size_t(row) * columns + column;
+      const bool dropped = damaged[0].status[column] == 0;
+      ASSERT_EQ(damaged[0].range[i], dropped ? 0u : intact[0].range[i]) << row << ", " << column;
+    }
+  const OusterMetadata v2_metadata = loadOusterMetadata(v2_metadata_path);
+  BatcherStatistics v2_statistics;
+  const std::vector<LidarScan> v2_scans = batch(v2_metadata, lidarPackets(v2_pcap, v2_metadata), v2_statistics);
+  EXPECT_EQ(v2_statistics.bad_checksum, 0u);
+  EXPECT_EQ(v2_scans.size(), 3u);
+  EXPECT_EQ(v2_statistics.incomplete_scans, 0u);
+}
+
 TEST(OusterPacket, DualReturnSecondRangeIsPlausible) {
   RIM_REQUIRE_DATA(pcap_path, "ouster-pcaps/OS-0-32-U1_v2.2.0_1024x10.pcap");
   RIM_REQUIRE_DATA(metadata_path, "ouster-pcaps/OS-0-32-U1_v2.2.0_1024x10.json");

@@ -45,7 +45,8 @@ struct LidarScan {
 // LEGACY: 16 (or columns_per_packet) columns of
 //   [u64 timestamp, u16 measurement id, u16 frame id, u32 encoder] H x 12 B [u32 status].
 // Other profiles: 32 B header (u16 packet type, u16 frame id, ...), columns of
-//   [u64 timestamp, u16 measurement id, u16 status] H x pixel bytes, 32 B footer.
+//   [u64 timestamp, u16 measurement id, u16 status] H x pixel bytes, 32 B footer
+//   (firmware 3.x: its last 8 bytes are a CRC64 of the packet before them).
 // Everything little-endian.
 class PacketFormat {
  public:
@@ -61,6 +62,11 @@ class PacketFormat {
 
   // Frame id of a packet of the right size (LEGACY: first column's frame id).
   uint32_t frameId(const uint8_t* packet) const;
+  // Whether a packet of the right size ends in the CRC64 of everything before
+  // it (CRC-64/XZ: ECMA-182, reflected, initial value and final XOR all ones).
+  // Firmware 3.x writes it in the last 8 bytes of the footer; 2.x does not,
+  // and LEGACY packets have no footer (always false).
+  bool checksumMatches(const uint8_t* packet) const;
 
   enum class Result { kOk, kWrongSize, kBadColumn, kNotLidar };
   // Checks a packet without decoding it: size, packet type, every measurement id

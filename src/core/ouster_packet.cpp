@@ -2,6 +2,8 @@
 
 #include "../io/little_endian.h"
 
+#include <boost/crc.hpp>
+
 #include <algorithm>
 #include <limits>
 #include <stdexcept>
@@ -27,6 +29,9 @@ constexpr std::size_t kLegacyEncoderOffset = 12;     // in the LEGACY column hea
 constexpr std::size_t kColumnStatusOffset = 10;      // in the non-LEGACY column header
 constexpr std::size_t kFrameIdOffset = 2;            // in the packet header
 constexpr uint16_t kLidarPacketType = 1;
+constexpr std::size_t kChecksumSize = 8;  // the footer's last bytes (firmware 3.x)
+// CRC-64/XZ: the ECMA-182 polynomial, reflected in and out, all-ones initial value and final XOR.
+using Crc64 = boost::crc_optimal<64, 0x42F0E1EBA9EA3693ull, ~0ull, ~0ull, true, true>;
 constexpr uint32_t kLegacyValidColumn = 0xFFFFFFFFu;
 
 // Raw pointers into the scan's fields, fetched once per packet.
@@ -187,6 +192,13 @@ uint32_t PacketFormat::frameId(const uint8_t* packet) const {
   return readLittleEndian<uint16_t>(packet + (profile_ == UdpProfile::kLegacy
                                                   ? kLegacyFrameIdOffset
                                                   : kFrameIdOffset));
+}
+
+bool PacketFormat::checksumMatches(const uint8_t* packet) const {
+  if (profile_ == UdpProfile::kLegacy) return false;
+  Crc64 crc;
+  crc.process_bytes(packet, packet_size_ - kChecksumSize);
+  return crc.checksum() == readLittleEndian<uint64_t>(packet + packet_size_ - kChecksumSize);
 }
 
 PacketFormat::Result PacketFormat::validate(const uint8_t* packet, std::size_t size) const {

@@ -17,7 +17,19 @@ uint32_t framesBehind(uint32_t frame_id, uint32_t reference) {
 ScanBatcher::ScanBatcher(const OusterMetadata& metadata, ScanCallback on_scan)
     : format_(metadata),
       on_scan_(std::move(on_scan)),
-      scan_(format_.rows(), format_.columns(), format_.profile()) {}
+      scan_(format_.rows(), format_.columns(), format_.profile()),
+      checksums_(format_.profile() == UdpProfile::kLegacy ? Checksums::kAbsent : Checksums::kUnknown) {}
+
+bool ScanBatcher::checksumAccepts(const uint8_t* data) {
+  if (checksums_ == Checksums::kAbsent) return true;
+  const bool matches = format_.checksumMatches(data);
+  if (checksums_ == Checksums::kPresent) return matches;
+  if (matches)
+    checksums_ = Checksums::kPresent;
+  else if (++packets_probed_ >= kChecksumProbePackets)
+    checksums_ = Checksums::kAbsent;
+  return true;
+}
 
 bool ScanBatcher::isStale(uint32_t frame_id) const {
   if (in_progress_) {
@@ -35,6 +47,10 @@ void ScanBatcher::addPacket(const uint8_t* data, std::size_t size) {
     case PacketFormat::Result::kWrongSize: ++statistics_.wrong_size; return;
     case PacketFormat::Result::kBadColumn:
     case PacketFormat::Result::kNotLidar: ++statistics_.malformed; return;
+  }
+  if (!checksumAccepts(data)) {
+    ++statistics_.bad_checksum;
+    return;
   }
   const uint32_t frame_id = format_.frameId(data);
   if (!in_progress_ || frame_id != scan_.frame_id) {

@@ -53,6 +53,7 @@ void accumulate(BatcherStatistics& total, const BatcherStatistics& part) {
   total.packets += part.packets;
   total.wrong_size += part.wrong_size;
   total.malformed += part.malformed;
+  total.bad_checksum += part.bad_checksum;
   total.stale += part.stale;
   total.scans += part.scans;
   total.incomplete_scans += part.incomplete_scans;
@@ -518,7 +519,8 @@ void AdapterNodelet::onStatisticsTimer(const ros::SteadyTimerEvent&) {
   const BatcherStatistics batcher = batcherStatistics();
   const BatcherStatistics& before = logged_batcher_statistics_;
   const std::size_t packet_drops = (batcher.wrong_size - before.wrong_size) +
-                                   (batcher.malformed - before.malformed) + (batcher.stale - before.stale);
+                                   (batcher.malformed - before.malformed) + (batcher.stale - before.stale) +
+                                   (batcher.bad_checksum - before.bad_checksum);
   const std::size_t incomplete = batcher.incomplete_scans - before.incomplete_scans;
   const ProjectionStatistics& projected = projection_statistics_;
   const ProjectionStatistics& projected_before = logged_projection_statistics_;
@@ -528,13 +530,14 @@ void AdapterNodelet::onStatisticsTimer(const ros::SteadyTimerEvent&) {
   const std::size_t other_drops = drops_.total() - logged_drops_.total();
   if (packet_drops + incomplete + point_drops + other_drops > 0) {
     NODELET_WARN(
-        "last %.0f s: packets dropped %zu (wrong size %zu, malformed %zu, stale %zu, "
+        "last %.0f s: packets dropped %zu (wrong size %zu, malformed %zu, bad checksum %zu, stale %zu, "
         "not Ouster packets %zu, no metadata %zu); incomplete scans %zu (%zu columns missing); "
         "points dropped %zu (non-finite %zu, at the origin %zu, outside the model %zu); "
         "clouds rejected %zu; "
         "scans failed %zu",
         parameters_.statistics_period_s, packet_drops, batcher.wrong_size - before.wrong_size,
-        batcher.malformed - before.malformed, batcher.stale - before.stale,
+        batcher.malformed - before.malformed, batcher.bad_checksum - before.bad_checksum,
+        batcher.stale - before.stale,
         drops_.foreign_packet_messages - logged_drops_.foreign_packet_messages,
         drops_.packets_without_metadata - logged_drops_.packets_without_metadata, incomplete,
         batcher.missing_columns - before.missing_columns, point_drops,

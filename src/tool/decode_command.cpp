@@ -94,6 +94,7 @@ int runDecode(const DecodeOptions& options) {
   std::cout << written << " scans written to " << options.output_directory << ", " << skipped
             << " incomplete skipped; " << statistics.lidar_datagrams << " lidar packets, "
             << batcher.wrong_size << " of wrong size, " << batcher.malformed << " malformed, "
+            << batcher.bad_checksum << " with a bad checksum, "
             << batcher.stale << " stale, " << batcher.missing_columns << " columns missing"
             << (statistics.classified_by_size ? " (lidar packets recognised by size: no datagram "
                                                 "went to the metadata's lidar port)"
