@@ -15,9 +15,9 @@
 #include "range_image_mapping/ouster_packet.h"
 #include "range_image_mapping/registration/lidar_odometry.h"
 #include "machine_info.h"
+#include "pcl_clouds.h"
 #include "test_data.h"
 
-#include <pcl/filters/voxel_grid.h>
 #include <pcl/point_types.h>
 #include <pcl/registration/gicp.h>
 #include <tbb/global_control.h>
@@ -43,16 +43,7 @@ double secondsSince(Clock::time_point start) {
 
 using benchmark_support::processCpuSeconds;
 
-PointCloud::Ptr downsampledCloud(const RangeImage& image, double voxel_m) {
-  PointCloud::Ptr cloud(new PointCloud);
-  for (const Eigen::Vector3f& point : image.unprojectAll()) cloud->push_back(pcl::PointXYZ(point.x(), point.y(), point.z()));
-  PointCloud::Ptr downsampled(new PointCloud);
-  pcl::VoxelGrid<pcl::PointXYZ> grid;
-  grid.setLeafSize(float(voxel_m), float(voxel_m), float(voxel_m));
-  grid.setInputCloud(cloud);
-  grid.filter(*downsampled);
-  return downsampled;
-}
+using benchmark_support::downsampledCloud;
 
 int run(int argc, char** argv) {
   const std::string source = argc > 1 ? argv[1] : "lb_n3";

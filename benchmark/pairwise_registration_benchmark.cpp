@@ -25,6 +25,7 @@
 //
 // Usage: pairwise_registration_benchmark DIR [pairs_per_distance=30] [voxel_m=auto] [seed=1]
 #include "machine_info.h"
+#include "pcl_clouds.h"
 #include "range_image_mapping/evaluation/report.h"
 #include "range_image_mapping/evaluation/trajectory_metrics.h"
 #include "range_image_mapping/io/pcap_reader.h"
@@ -95,16 +96,7 @@ PointNormalCloud::Ptr downsampledCloudWithNormals(const RangeImage& image, doubl
   return downsampled;
 }
 
-PointCloud::Ptr downsampledCloud(const RangeImage& image, double voxel_m) {
-  PointCloud::Ptr cloud(new PointCloud);
-  for (const Eigen::Vector3f& point : image.unprojectAll()) cloud->push_back(pcl::PointXYZ(point.x(), point.y(), point.z()));
-  PointCloud::Ptr downsampled(new PointCloud);
-  pcl::VoxelGrid<pcl::PointXYZ> grid;
-  grid.setLeafSize(float(voxel_m), float(voxel_m), float(voxel_m));
-  grid.setInputCloud(cloud);
-  grid.filter(*downsampled);
-  return downsampled;
-}
+using benchmark_support::downsampledCloud;
 
 struct Method {
   std::string name;

@@ -16,6 +16,7 @@
 #include "range_image_mapping/ros/range_image_conversions.h"
 #include "range_image_mapping/ros/statistics_window.h"
 #include "range_image_mapping/ros/steady_throttle.h"
+#include "range_image_mapping/ros/wall_clock_diagnostics.h"
 #include "range_image_mapping/scan_motion.h"
 
 #include <diagnostic_updater/diagnostic_updater.h>
@@ -255,10 +256,10 @@ class MapperNodelet : public nodelet::Nodelet {
   std::unique_ptr<Synchronizer> synchronizer_;
   ros::Publisher mesh_publisher_, surface_points_publisher_;
   ros::ServiceServer save_mesh_service_, reset_service_, republish_mesh_service_;
-  ros::SteadyTimer mesh_timer_, pending_timer_, statistics_timer_, diagnostics_timer_;
+  ros::SteadyTimer mesh_timer_, pending_timer_, statistics_timer_;
   std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
-  std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
+  std::unique_ptr<WallClockDiagnostics> diagnostics_;
 
   // pose_source tf: scans waiting for world_frame -> lidar at their stamp.
   struct PendingScan {
@@ -314,14 +315,8 @@ void MapperNodelet::onInit() {
   reset_service_ = private_node.advertiseService("reset", &MapperNodelet::onReset, this);
   republish_mesh_service_ = private_node.advertiseService("republish_mesh", &MapperNodelet::onRepublishMesh, this);
 
-  diagnostics_ = std::make_unique<diagnostic_updater::Updater>(node, private_node, getName());
-  diagnostics_->setHardwareID("tsdf_mapper");
-  diagnostics_->add("mapping", this, &MapperNodelet::diagnose);
-  // force_update: the updater's own period runs on ROS time, which stops
-  // with a paused replay and, after a bag loop, would hold diagnostics back
-  // for as long as the jump; this timer runs on wall time.
-  diagnostics_timer_ = node.createSteadyTimer(ros::WallDuration(1.0),
-                                              [this](const ros::SteadyTimerEvent&) { diagnostics_->force_update(); });
+  diagnostics_ = std::make_unique<WallClockDiagnostics>(node, private_node, getName(), "tsdf_mapper");
+  diagnostics_->updater().add("mapping", this, &MapperNodelet::diagnose);
   statistics_timer_ = node.createSteadyTimer(ros::WallDuration(parameters_.statistics_period_s),
                                              &MapperNodelet::onStatisticsTimer, this);
   log_window_.advance(statistics_);  // the first windows start now

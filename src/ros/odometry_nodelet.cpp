@@ -10,6 +10,7 @@
 #include "range_image_mapping/ros/parameters.h"
 #include "range_image_mapping/ros/statistics_window.h"
 #include "range_image_mapping/ros/steady_throttle.h"
+#include "range_image_mapping/ros/wall_clock_diagnostics.h"
 #include "range_image_mapping/ros/range_image_conversions.h"
 
 #include <diagnostic_updater/diagnostic_updater.h>
@@ -147,11 +148,11 @@ class OdometryNodelet : public nodelet::Nodelet {
   ros::Subscriber range_image_subscriber_;
   ros::Publisher odometry_publisher_, path_publisher_, deskewed_cloud_publisher_;
   ros::ServiceServer reset_service_;
-  ros::SteadyTimer statistics_timer_, diagnostics_timer_;
+  ros::SteadyTimer statistics_timer_;
   std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
   std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;
-  std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
+  std::unique_ptr<WallClockDiagnostics> diagnostics_;
 
   // base_frame -> lidar frame, looked up once per lidar frame name.
   std::string lidar_frame_;
@@ -193,14 +194,8 @@ void OdometryNodelet::onInit() {
     deskewed_cloud_publisher_ = node.advertise<sensor_msgs::PointCloud2>("deskewed_cloud", 4);
   reset_service_ = getPrivateNodeHandle().advertiseService("reset", &OdometryNodelet::onReset, this);
 
-  diagnostics_ = std::make_unique<diagnostic_updater::Updater>(node, getPrivateNodeHandle(), getName());
-  diagnostics_->setHardwareID("lidar_odometry");
-  diagnostics_->add("odometry", this, &OdometryNodelet::diagnose);
-  // force_update: the updater's own period runs on ROS time, which stops
-  // with a paused replay and, after a bag loop, would hold diagnostics back
-  // for as long as the jump; this timer runs on wall time.
-  diagnostics_timer_ = node.createSteadyTimer(ros::WallDuration(1.0),
-                                              [this](const ros::SteadyTimerEvent&) { diagnostics_->force_update(); });
+  diagnostics_ = std::make_unique<WallClockDiagnostics>(node, getPrivateNodeHandle(), getName(), "lidar_odometry");
+  diagnostics_->updater().add("odometry", this, &OdometryNodelet::diagnose);
   statistics_timer_ = node.createSteadyTimer(ros::WallDuration(parameters_.statistics_period_s),
                                              &OdometryNodelet::onStatisticsTimer, this);
 
@@ -292,7 +287,7 @@ void OdometryNodelet::onRangeImage(const LidarRangeImage::ConstPtr& message) {
     publish(update, message->header, *base_from_lidar, step_s);
     if (deskewed_cloud_publisher_ && deskewed_cloud_publisher_.getNumSubscribers() > 0)
       publishDeskewedCloud(message->header);
-    diagnostics_->update();
+    diagnostics_->updater().update();
   } catch (const std::exception& error) {
     ++statistics_.rejected;
     if (error_log_.allow(parameters_.statistics_period_s))
