@@ -117,13 +117,9 @@ void scoreSurface(const std::vector<Eigen::Vector3f>& surface, const test::Mappi
   for (int t = 0; t < 3; ++t)
     row.metrics[t] =
         evaluation::compareSurfaces(surface, truth.sequence.surface, kThresholdVoxels[t] * preset.voxel_m);
-  const std::vector<float> to_scene = evaluation::nearestDistances(surface, truth.scene);
-  const double threshold = kThresholdVoxels[0] * preset.voxel_m;
-  row.scene_precision = double(std::count_if(to_scene.begin(), to_scene.end(), [&](float d) { return d < threshold; })) /
-                        double(std::max<std::size_t>(to_scene.size(), 1));
-  const double recall = row.metrics[0].recall;
-  row.scene_f_score =
-      row.scene_precision + recall > 0.0 ? 2.0 * row.scene_precision * recall / (row.scene_precision + recall) : 0.0;
+  row.scene_precision = evaluation::shareBelow(evaluation::nearestDistances(surface, truth.scene),
+                                               kThresholdVoxels[0] * preset.voxel_m);
+  row.scene_f_score = evaluation::fScore(row.scene_precision, row.metrics[0].recall);
 }
 
 // Ours: integrate every scan, then update the mesh after it, as a 10 Hz

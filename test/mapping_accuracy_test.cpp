@@ -106,17 +106,13 @@ void compareWithOctomap(const test::MappingPreset& preset) {
               scene.size());
   const std::vector<float> ours_to_scene = evaluation::nearestDistances(ours, scene);
   const std::vector<float> octomap_to_scene = evaluation::nearestDistances(octomap, scene);
-  const auto onScene = [](const std::vector<float>& distances, double threshold) {
-    return double(std::count_if(distances.begin(), distances.end(), [&](float d) { return d < threshold; })) /
-           double(distances.size());
-  };
   for (const double voxels : {3.0, 1.0, 0.5}) {
     const double threshold = voxels * preset.voxel_m;
     const evaluation::SurfaceMetrics ours_metrics = evaluation::compareSurfaces(ours, sequence.surface, threshold);
     const evaluation::SurfaceMetrics octomap_metrics =
         evaluation::compareSurfaces(octomap, sequence.surface, threshold);
-    const double ours_on_scene = onScene(ours_to_scene, threshold);
-    const double octomap_on_scene = onScene(octomap_to_scene, threshold);
+    const double ours_on_scene = evaluation::shareBelow(ours_to_scene, threshold);
+    const double octomap_on_scene = evaluation::shareBelow(octomap_to_scene, threshold);
     printMetrics("TSDF mesh", ours_metrics);
     std::printf("  %-26s           P against the whole scene %.4f\n", "", ours_on_scene);
     printMetrics("OctoMap occupied centres", octomap_metrics);

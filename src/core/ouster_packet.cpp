@@ -29,10 +29,10 @@ constexpr std::size_t kLegacyEncoderOffset = 12;     // in the LEGACY column hea
 constexpr std::size_t kColumnStatusOffset = 10;      // in the non-LEGACY column header
 constexpr std::size_t kFrameIdOffset = 2;            // in the packet header
 constexpr uint16_t kLidarPacketType = 1;
+constexpr uint32_t kLegacyValidColumn = 0xFFFFFFFFu;
 constexpr std::size_t kChecksumSize = 8;  // the footer's last bytes (firmware 3.x)
 // CRC-64/XZ: the ECMA-182 polynomial, reflected in and out, all-ones initial value and final XOR.
 using Crc64 = boost::crc_optimal<64, 0x42F0E1EBA9EA3693ull, ~0ull, ~0ull, true, true>;
-constexpr uint32_t kLegacyValidColumn = 0xFFFFFFFFu;
 
 // Raw pointers into the scan's fields, fetched once per packet.
 struct ScanFields {

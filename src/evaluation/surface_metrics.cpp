@@ -79,13 +79,19 @@ double medianOf(std::vector<float> values) {
   return 0.5 * (lower + upper);
 }
 
+}  // namespace
+
 double shareBelow(const std::vector<float>& distances, double threshold) {
+  if (distances.empty()) return 0.0;
   const auto below = std::count_if(distances.begin(), distances.end(),
                                    [threshold](float distance) { return distance < threshold; });
   return static_cast<double>(below) / static_cast<double>(distances.size());
 }
 
-}  // namespace
+double fScore(double precision, double recall) {
+  const double sum = precision + recall;
+  return sum > 0 ? 2.0 * precision * recall / sum : 0.0;
+}
 
 SurfaceSample loadSurfaceSample(const std::string& path, const SurfaceSamplingOptions& options) {
   const std::string extension = lowerCaseExtension(path);
@@ -165,11 +171,8 @@ SurfaceMetrics compareSurfaces(const std::vector<Eigen::Vector3f>& estimate,
 
   metrics.precision = shareBelow(metrics.estimate_to_truth_m, threshold_m);
   metrics.recall = shareBelow(metrics.truth_to_estimate_m, threshold_m);
-  const double sum = metrics.precision + metrics.recall;
-  if (sum > 0) {
-    metrics.f_score_paper = metrics.precision * metrics.recall / sum;
-    metrics.f_score = 2.0 * metrics.f_score_paper;
-  }
+  metrics.f_score = fScore(metrics.precision, metrics.recall);
+  metrics.f_score_paper = 0.5 * metrics.f_score;
   metrics.accuracy_mean_m = meanOf(metrics.estimate_to_truth_m);
   metrics.accuracy_median_m = medianOf(metrics.estimate_to_truth_m);
   metrics.completeness_mean_m = meanOf(metrics.truth_to_estimate_m);

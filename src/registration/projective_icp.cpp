@@ -37,9 +37,11 @@ struct ChunkPairs {
   std::size_t count = 0;    // points in the chunk
   std::size_t inliers = 0;  // of them with a pair
 
-  void pad() {
+  // Zeroes the rows up to whole lanes; returns the padded length.
+  std::size_t pad() {
     const std::size_t padded = (count + kLanes - 1) / kLanes * kLanes;
     for (auto& row : rows) std::fill(row + count, row + padded, 0.0f);
+    return padded;
   }
 };
 
@@ -161,9 +163,8 @@ struct NormalEquations {
   // J^T W J += sum_k w_k J_k J_k^T; J^T W r += sum_k w_k r_k J_k (paper eq. 6).
   void add(ChunkPairs& pairs) {
     if (pairs.inliers == 0) return;
-    pairs.pad();
     double sums[kChunkSums];
-    chunkSums(pairs.rows, (pairs.count + kLanes - 1) / kLanes * kLanes, sums);
+    chunkSums(pairs.rows, pairs.pad(), sums);
     for (std::size_t k = 0; k < hessian_upper.size(); ++k) hessian_upper[k] += sums[k];
     for (int i = 0; i < 6; ++i) gradient(i) += sums[hessian_upper.size() + i];
     squared_residuals += sums[kChunkSums - 1];

@@ -43,6 +43,12 @@ SurfaceSample loadSurfaceSample(const std::string& path, const SurfaceSamplingOp
 std::vector<float> nearestDistances(const std::vector<Eigen::Vector3f>& queries,
                                     const std::vector<Eigen::Vector3f>& reference);
 
+// The share of distances below the threshold (0 for none): precision or
+// recall from nearestDistances.
+double shareBelow(const std::vector<float>& distances, double threshold);
+// 2PR / (P + R), 0 when both are 0.
+double fScore(double precision, double recall);
+
 struct SurfaceMetrics {
   double threshold_m = 0;
   std::size_t estimate_points = 0, ground_truth_points = 0;
