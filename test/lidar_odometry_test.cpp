@@ -253,6 +253,119 @@ TEST(LidarOdometry, RejectsOptionsThatCannotWork) {
   options = {};
   options.deskew_convergence_m = -1.0;
   EXPECT_THROW(LidarOdometry{options}, std::invalid_argument);
+  options = {};
+  options.max_speed_mps = -1.0;
+  EXPECT_THROW(LidarOdometry{options}, std::invalid_argument);
+  options = {};
+  options.max_acceleration_mps2 = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(LidarOdometry{options}, std::invalid_argument);
+  options = {};
+  options.velocity_decay_time_s = std::numeric_limits<double>::infinity();
+  try {
+    LidarOdometry{options};
+    ADD_FAILURE() << "an infinite velocity_decay_time_s was accepted";
+  } catch (const std::invalid_argument& error) {
+    EXPECT_NE(std::string(error.what()).find("velocity_decay_time_s"), std::string::npos) << error.what();
+  }
+}
+
+// A sensor standing still whose attitude wanders by 1e-9 to 2e-8 rad per scan
+// (the real Velodyne driver's case that sent the pose to infinity): every
+// update finite, the pose and the velocity stay at rest.
+TEST(LidarOdometry, AStationarySensorWithTinyRotationsStaysFiniteAndAtRest) {
+  const Motion wander = [](double time_s) {
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    pose.linear() = Eigen::AngleAxisd(1.5e-7 * time_s, Eigen::Vector3d(0.3, -0.2, 1.0).normalized()).toRotationMatrix();
+    return pose;
+  };
+  LidarOdometry odometry;
+  for (int k = 0; k < 20; ++k) {
+    const OdometryUpdate update = odometry.process(roomScan(wander, k * kScanPeriodS, kScanPeriodS));
+    expectFinite(update);
+    EXPECT_FALSE(update.degenerate) << "scan " << k << ": " << update.warning;
+    EXPECT_LT(update.pose.translation().norm(), 1e-3) << "scan " << k;
+    EXPECT_LT(rotationDegrees(update.pose), 1e-2) << "scan " << k;
+    EXPECT_LT(update.linear_velocity.norm(), 1e-2) << "scan " << k;
+    EXPECT_NEAR(Eigen::Quaterniond(update.pose.linear()).norm(), 1.0, 1e-12);
+  }
+}
+
+// The steady motion is 2.06 m/s: a platform limited to 1 m/s does not trust
+// the registration, keeps the prior (at rest after the first scan) and says
+// which limit broke.
+TEST(LidarOdometry, ARegistrationBreakingTheSpeedLimitIsNotTrusted) {
+  OdometryOptions options;
+  options.max_speed_mps = 1.0;
+  LidarOdometry odometry(options);
+  odometry.process(roomScan(steadyMotion, 0.0, 0.0));
+  const OdometryUpdate update = odometry.process(roomScan(steadyMotion, kScanPeriodS, 0.0));
+  expectFinite(update);
+  EXPECT_TRUE(update.limit_exceeded);
+  EXPECT_TRUE(update.degenerate);
+  EXPECT_NE(update.warning.find("max_speed"), std::string::npos) << update.warning;
+  EXPECT_NE(update.warning.find("motion prior used"), std::string::npos) << update.warning;
+  EXPECT_TRUE(update.pose.isApprox(Eigen::Isometry3d::Identity()));
+  // The same motion within the limits is trusted.
+  LidarOdometry unlimited;
+  unlimited.process(roomScan(steadyMotion, 0.0, 0.0));
+  const OdometryUpdate trusted = unlimited.process(roomScan(steadyMotion, kScanPeriodS, 0.0));
+  EXPECT_FALSE(trusted.limit_exceeded) << trusted.warning;
+  EXPECT_NEAR(trusted.linear_velocity.norm(), std::sqrt(2.0 * 2.0 + 0.5 * 0.5 + 0.1 * 0.1), 0.05);
+}
+
+TEST(LidarOdometry, ARegistrationBreakingTheAngularRateLimitIsNotTrusted) {
+  OdometryOptions options;
+  options.max_angular_rate_radps = 0.5;  // the steady motion turns at 40 deg/s = 0.70 rad/s
+  LidarOdometry odometry(options);
+  odometry.process(roomScan(steadyMotion, 0.0, 0.0));
+  const OdometryUpdate update = odometry.process(roomScan(steadyMotion, kScanPeriodS, 0.0));
+  EXPECT_TRUE(update.limit_exceeded);
+  EXPECT_NE(update.warning.find("max_angular_rate"), std::string::npos) << update.warning;
+}
+
+// At rest for three scans, then 1 m/s at once: 10 m/s^2 between two scans.
+// The acceleration is not checked on the first step after a restart (the
+// velocity is not known yet), so a moving start is trusted.
+TEST(LidarOdometry, ASuddenChangeOfVelocityBreaksTheAccelerationLimit) {
+  const Motion start = [](double time_s) {
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    pose.translation().x() = std::max(0.0, time_s - 0.25);
+    return pose;
+  };
+  OdometryOptions options;
+  options.max_acceleration_mps2 = 5.0;
+  LidarOdometry odometry(options);
+  for (int k = 0; k < 3; ++k) {
+    const OdometryUpdate update = odometry.process(roomScan(start, k * kScanPeriodS, 0.0));
+    EXPECT_FALSE(update.degenerate) << update.warning;
+  }
+  const OdometryUpdate update = odometry.process(roomScan(start, 3 * kScanPeriodS, 0.0));
+  EXPECT_TRUE(update.limit_exceeded);
+  EXPECT_NE(update.warning.find("max_acceleration"), std::string::npos) << update.warning;
+
+  LidarOdometry moving_start(options);
+  moving_start.process(roomScan(steadyMotion, 0.0, 0.0));
+  const OdometryUpdate first_step = moving_start.process(roomScan(steadyMotion, kScanPeriodS, 0.0));
+  EXPECT_FALSE(first_step.limit_exceeded) << first_step.warning;
+}
+
+// Good scans give a velocity; then only the floor is seen (degenerate): the
+// prior carries the velocity on, decaying by exp(-dt / velocity_decay_time_s)
+// each scan instead of for ever.
+TEST(LidarOdometry, TheVelocityDecaysOverDegenerateScans) {
+  LidarOdometry odometry;
+  OdometryUpdate update;
+  for (int k = 0; k < 3; ++k) update = odometry.process(roomScan(steadyMotion, k * kScanPeriodS, 0.0));
+  double speed = update.linear_velocity.norm();
+  ASSERT_GT(speed, 1.0);
+  const double factor = std::exp(-kScanPeriodS / OdometryOptions().velocity_decay_time_s);
+  for (int k = 3; k < 8; ++k) {
+    update = odometry.process(roomScan(steadyMotion, k * kScanPeriodS, 0.0, true));
+    ASSERT_TRUE(update.degenerate) << "scan " << k;
+    expectFinite(update);
+    EXPECT_NEAR(update.linear_velocity.norm(), factor * speed, 1e-9) << "scan " << k;
+    speed = update.linear_velocity.norm();
+  }
 }
 
 // A simulated sequence: scans (as the sensor reports them, motion-distorted)
@@ -290,6 +403,7 @@ Sequence simulateSequence(simulation::SceneKind kind, simulation::MotionProfile 
 struct SequenceRun {
   evaluation::TrajectoryEvaluation evaluation;
   double iterations_per_scan = 0.0;  // Gauss-Newton steps, all levels and deskews
+  int limit_exceeded = 0;             // registrations not trusted
 };
 
 SequenceRun runSequence(const Sequence& sequence, OdometryOptions options) {
@@ -299,7 +413,10 @@ SequenceRun runSequence(const Sequence& sequence, OdometryOptions options) {
   for (const RangeImage& scan : sequence.scans) {
     const OdometryUpdate update = odometry.process(scan);
     expectFinite(update);
-    EXPECT_FALSE(update.degenerate) << update.warning;
+    // A registration that breaks a physical limit is not an error of the
+    // odometry: it is caught, and counted.
+    EXPECT_FALSE(update.degenerate && !update.limit_exceeded) << update.warning;
+    run.limit_exceeded += update.limit_exceeded;
     estimate.push_back(update.pose);
     run.iterations_per_scan += double(update.iterations) / double(sequence.scans.size());
   }
@@ -334,8 +451,12 @@ TEST(LidarOdometry, DeskewReducesTheErrorOfAFastHandheldSequence) {
   as_measured.deskew = false;
   const SequenceRun deskewed_run = runSequence(sequence, deskewed);
   const evaluation::TrajectoryEvaluation& with = deskewed_run.evaluation;
-  const evaluation::TrajectoryEvaluation with_late = runSequence(sequence, late).evaluation;
-  const evaluation::TrajectoryEvaluation without = runSequence(sequence, as_measured).evaluation;
+  const SequenceRun late_run = runSequence(sequence, late), as_measured_run = runSequence(sequence, as_measured);
+  const evaluation::TrajectoryEvaluation& with_late = late_run.evaluation;
+  const evaluation::TrajectoryEvaluation& without = as_measured_run.evaluation;
+  std::cout << "registrations not trusted (physical limits): " << deskewed_run.limit_exceeded << " deskewed, "
+            << late_run.limit_exceeded << " one scan late, " << as_measured_run.limit_exceeded << " as measured\n";
+  EXPECT_EQ(deskewed_run.limit_exceeded, 0);
   std::cout << "handheld fast, 20 frames: ATE " << with.absolute_translation_m.rmse << " m deskewed, "
             << with_late.absolute_translation_m.rmse << " m deskewed one scan late, "
             << without.absolute_translation_m.rmse << " m as measured; frame to frame "

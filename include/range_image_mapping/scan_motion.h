@@ -19,7 +19,8 @@ using Twist = Eigen::Matrix<double, 6, 1>;  // [angular rad/s, linear m/s], body
 // SE(3) exponential: the pose reached after one unit of time at this constant
 // body-frame velocity.
 Eigen::Isometry3d twistExponential(const Twist& twist);
-// Inverse of twistExponential() for rotations below pi.
+// Inverse of twistExponential(): the twist with a rotation angle in [0, pi].
+// Both are exact to double precision at every angle (series near zero).
 Twist twistLogarithm(const Eigen::Isometry3d& pose);
 
 // The constant body twist that moves `previous` to `current` in dt_s seconds:
@@ -27,9 +28,23 @@ Twist twistLogarithm(const Eigen::Isometry3d& pose);
 // given at scan times (a pose file, tf) yield the motion within a sweep.
 Twist twistBetween(const Eigen::Isometry3d& previous, const Eigen::Isometry3d& current, double dt_s);
 
-// The image's stamp_ns, or its first valid column's timestamp when the stamp
-// is 0 (design.md: scan time); 0 when there is neither.
-uint64_t scanTime(const RangeImage& scan);
+// The body twist of a frame rigidly attached to the moving one:
+// Ad(to_from_frame) twist, for a twist given in `frame`. E.g. the base's
+// twist from the lidar's with base_from_lidar, and back with its inverse.
+Twist twistInFrame(const Eigen::Isometry3d& to_from_frame, const Twist& twist);
+
+// Which clock gives a scan its time: the pose's and the deskewed points' time
+// (design.md: scan time).
+enum class ScanTimeSource {
+  // The first valid column's timestamp, on the sensor's clock: what the column
+  // times of the deskew are measured from. Without column times, the stamp.
+  kFirstValidColumn,
+  // The image's stamp_ns (e.g. a header stamp), even when columns carry times.
+  kStamp,
+};
+
+// The scan's time by that source; 0 when it has none.
+uint64_t scanTime(const RangeImage& scan, ScanTimeSource source);
 
 // Per column u, [R | t] = exp((t_u - t0) * twist): a point measured in the
 // lidar frame at the column's time, in the lidar frame at the scan time t0.

@@ -19,6 +19,14 @@ using Matrix6d = Eigen::Matrix<double, 6, 6>;
 
 bool isFinite(const Eigen::Isometry3d& pose) { return pose.matrix().allFinite(); }
 
+// A product of many poses drifts off SO(3); the published quaternion must stay
+// a unit one.
+Eigen::Isometry3d orthonormalized(const Eigen::Isometry3d& pose) {
+  Eigen::Isometry3d result = pose;
+  result.linear() = Eigen::Quaterniond(pose.linear()).normalized().toRotationMatrix();
+  return result;
+}
+
 std::string seconds(double value) {
   std::ostringstream text;
   text.precision(3);
@@ -43,19 +51,45 @@ LidarOdometry::LidarOdometry(OdometryOptions options)
     throw std::invalid_argument("odometry: deskew convergence thresholds must not be negative");
   if (options_.keyframe_distance_m < 0.0 || options_.keyframe_angle_rad < 0.0)
     throw std::invalid_argument("odometry: keyframe distance and angle must not be negative");
+  const std::pair<const char*, double> limits[] = {
+      {"max_speed_mps", options_.max_speed_mps},
+      {"max_angular_rate_radps", options_.max_angular_rate_radps},
+      {"max_acceleration_mps2", options_.max_acceleration_mps2},
+      {"velocity_decay_time_s", options_.velocity_decay_time_s}};
+  for (const auto& [name, value] : limits)
+    if (!(value >= 0.0) || !std::isfinite(value))
+      throw std::invalid_argument(std::string("odometry: ") + name + " must be finite and not negative (0: off), not " +
+                                  std::to_string(value));
 }
 
 void LidarOdometry::reset() {
   pose_ = keyframe_pose_ = Eigen::Isometry3d::Identity();
   twist_.setZero();
   has_target_ = false;
+  velocity_known_ = false;
   last_stamp_ns_ = 0;
 }
 
-OdometryUpdate LidarOdometry::process(const RangeImage& input) {
+OdometryUpdate LidarOdometry::process(const RangeImage& scan) {
+  return process(scan, scanTime(scan, ScanTimeSource::kFirstValidColumn));
+}
+
+OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_time_ns) {
   const auto started = std::chrono::steady_clock::now();
   OdometryUpdate update;
+  // Nothing non-finite ever leaves: a step that would give one is undone.
+  const Eigen::Isometry3d previous_pose = pose_, previous_keyframe_pose = keyframe_pose_;
+  const Twist previous_twist = twist_;
   const auto finish = [&]() {
+    if (!isFinite(pose_) || !twist_.allFinite()) {
+      pose_ = previous_pose;
+      keyframe_pose_ = previous_keyframe_pose;
+      twist_ = previous_twist;
+      update.degenerate = true;
+      update.warning += std::string(update.warning.empty() ? "" : "; ") +
+                        "non-finite pose or velocity: step undone, previous pose kept";
+    }
+    if (!update.covariance.allFinite()) update.covariance.setIdentity();
     update.pose = pose_;
     update.angular_velocity = twist_.head<3>();
     update.linear_velocity = twist_.tail<3>();
@@ -77,12 +111,13 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input) {
   const RangeImage& scan = input.column_order == ColumnOrder::kStaggered ? input : (staggered_ = input.staggered());
   if (std::none_of(scan.range.begin(), scan.range.end(), isValidRange))
     return skip("range image without a single valid range");
-  const uint64_t stamp = scanTime(scan);
+  const uint64_t stamp = scan_time_ns;
   update.stamp_ns = stamp;
 
   if (!has_target_) {
     restart(scan, stamp);
     update.reset = true;
+    update.restart = RestartReason::kFirstScan;
     return finish();
   }
   if (stamp == last_stamp_ns_) return skip("same stamp as the previous scan (" + std::to_string(stamp) + " ns)");
@@ -93,6 +128,7 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input) {
                          : seconds(double(stamp - last_stamp_ns_) * 1e-9) + " since the previous scan (more than " +
                                seconds(options_.max_time_gap_s) + ")";
     update.warning += ": odometry restarted from the current pose";
+    update.restart = stamp < last_stamp_ns_ ? RestartReason::kTimeWentBack : RestartReason::kTimeGap;
     restart(scan, stamp);
     update.reset = true;
     return finish();
@@ -191,11 +227,23 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input) {
   else if (!(result.condition_number <= options_.max_condition_number))
     degeneracy = "condition number " + std::to_string(result.condition_number) + " (above " +
                  std::to_string(options_.max_condition_number) + ")";
+  // A registration that breaks the platform's limits followed something other
+  // than the static world, or a wrong minimum: not trusted.
+  Twist registered_twist = Twist::Zero();
+  if (degeneracy.empty()) {
+    registered_twist = twistBetween(pose_, keyframe_pose_ * result.target_from_source, dt);
+    const std::string limit = physicalLimitBroken(registered_twist, dt);
+    if (!limit.empty()) {
+      update.limit_exceeded = true;
+      update.warning = "registration not trusted, " + limit + ": motion prior used";
+    }
+  }
   Eigen::Isometry3d target_from_current = result.target_from_source;
-  if (!degeneracy.empty()) {
+  if (!degeneracy.empty() || update.limit_exceeded) {
     update.degenerate = true;
-    update.warning = "degenerate registration, " + degeneracy + ": motion prior used";
+    if (!degeneracy.empty()) update.warning = "degenerate registration, " + degeneracy + ": motion prior used";
     target_from_current = guess;
+    if (options_.velocity_decay_time_s > 0.0) twist_ *= std::exp(-dt / options_.velocity_decay_time_s);
   } else {
     const std::size_t degrees_of_freedom = std::max<std::size_t>(result.inliers, 7) - 6;
     const double variance = result.residual_rms_m * result.residual_rms_m * double(result.inliers) /
@@ -206,9 +254,11 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input) {
       if (covariance.allFinite()) update.covariance = 0.5 * (covariance + covariance.transpose());
     }
   }
-  const Eigen::Isometry3d pose = keyframe_pose_ * target_from_current;
-  if (!update.degenerate) twist_ = twistBetween(pose_, pose, dt);
-  pose_ = pose;
+  if (!update.degenerate) {
+    twist_ = registered_twist;
+    velocity_known_ = true;
+  }
+  pose_ = orthonormalized(keyframe_pose_ * target_from_current);
   last_stamp_ns_ = stamp;
 
   // The next target: this scan deskewed with the velocity just estimated.
@@ -232,8 +282,31 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input) {
   return finish();
 }
 
+std::string LidarOdometry::physicalLimitBroken(const Twist& twist, double dt_s) const {
+  const auto text = [](double value, double limit, const char* unit, const char* name) {
+    std::ostringstream out;
+    out.precision(3);
+    out << value << " " << unit << " (above " << name << " " << limit << " " << unit << ")";
+    return out.str();
+  };
+  if (!twist.allFinite()) return "non-finite motion";
+  const double speed = twist.tail<3>().norm(), rate = twist.head<3>().norm();
+  if (options_.max_speed_mps > 0.0 && speed > options_.max_speed_mps)
+    return "speed " + text(speed, options_.max_speed_mps, "m/s", "max_speed");
+  if (options_.max_angular_rate_radps > 0.0 && rate > options_.max_angular_rate_radps)
+    return "angular rate " + text(rate, options_.max_angular_rate_radps, "rad/s", "max_angular_rate");
+  if (options_.max_acceleration_mps2 > 0.0 && velocity_known_) {
+    const double acceleration = (twist.tail<3>() - twist_.tail<3>()).norm() / dt_s;
+    if (acceleration > options_.max_acceleration_mps2)
+      return "acceleration " + text(acceleration, options_.max_acceleration_mps2, "m/s^2", "max_acceleration");
+  }
+  return {};
+}
+
 void LidarOdometry::restart(const RangeImage& scan, uint64_t stamp_ns) {
   twist_.setZero();
+  velocity_known_ = false;
+  if (!isFinite(pose_)) pose_.setIdentity();  // never restart from a non-finite pose
   computeVertexNormalMap(scan, 1, options_.registration.normals, measured_);
   deskewed_ = measured_;
   makeTarget(scan, false);

@@ -8,6 +8,7 @@
 
 #include <Eigen/Geometry>
 
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -38,6 +39,28 @@ struct OdometryOptions {
   double keyframe_angle_rad = 0.0;
   // A scan more than this after the previous one, or before it, resets the odometry.
   double max_time_gap_s = 1.0;
+  // Physical limits of the platform. A registration whose motion breaks one
+  // (a registration that followed a moving object, or jumped to a wrong
+  // minimum) is not trusted: the motion prior is used, and said. 0 turns a
+  // limit off. The defaults admit a car at 180 km/h braking at 3 g and a
+  // sensor swung by hand at a turn per second; config/*.yaml narrow them.
+  double max_speed_mps = 50.0;
+  double max_angular_rate_radps = 2.0 * M_PI;
+  // Of the linear velocity between two trusted steps; not checked on the
+  // first step after a restart, whose velocity is unknown.
+  double max_acceleration_mps2 = 30.0;
+  // On a step that fell back to the prior the velocity decays as
+  // exp(-dt / velocity_decay_time_s), so that a long run of degenerate scans
+  // comes to rest instead of carrying one velocity for ever. 0: kept as is.
+  double velocity_decay_time_s = 1.0;
+};
+
+// Why a scan started a new odometry.
+enum class RestartReason {
+  kNone,
+  kFirstScan,     // the first scan, or the first after reset()
+  kTimeWentBack,  // the scan is older than the previous one (a bag loop, a clock step)
+  kTimeGap,       // more than max_time_gap_s since the previous scan
 };
 
 struct OdometryUpdate {
@@ -55,8 +78,10 @@ struct OdometryUpdate {
   int iterations = 0;
   double condition_number = 0.0;  // of the last hessian
   double residual_rms_m = 0.0;
-  bool degenerate = false;   // the motion prior was used
-  bool reset = false;        // this scan started a new odometry (first scan, time jump)
+  bool degenerate = false;   // the motion prior was used (degenerate or untrusted registration)
+  bool limit_exceeded = false;  // ... because the registration broke a physical limit
+  bool reset = false;        // this scan started a new odometry: see restart
+  RestartReason restart = RestartReason::kNone;
   bool skipped = false;      // the scan was not used (empty, all invalid, same stamp)
   std::string warning;       // why a scan was skipped, reset or degenerate; empty if none
   double seconds = 0.0;      // wall time of this step
@@ -73,10 +98,15 @@ struct OdometryUpdate {
 class LidarOdometry {
  public:
   explicit LidarOdometry(OdometryOptions options = {});
-  // Never returns a non-finite pose: bad scans (empty, all invalid, identical,
-  // out of order) are reported in `warning` and leave the pose unchanged. A
-  // scan before the previous one or more than max_time_gap_s after it
-  // restarts the odometry from the current pose (velocity zero, new target).
+  // Never returns a non-finite pose, velocity or covariance: bad scans
+  // (empty, all invalid, identical, out of order) are reported in `warning`
+  // and leave the pose unchanged. A scan before the previous one or more than
+  // max_time_gap_s after it restarts the odometry from the current pose
+  // (velocity zero, new target), which is always finite.
+  // scan_time_ns: the time the pose refers to and the column times are
+  // measured from (scanTime(); the pipeline's scan-time source).
+  OdometryUpdate process(const RangeImage& scan, uint64_t scan_time_ns);
+  // With the first valid column's time (ScanTimeSource::kFirstValidColumn).
   OdometryUpdate process(const RangeImage& scan);
   // Forgets everything: the next scan starts at the identity.
   void reset();
@@ -85,9 +115,16 @@ class LidarOdometry {
   // The last used scan's points and normals, deskewed to its scan time (lidar
   // frame, NaN where invalid); e.g. for publishing the deskewed cloud.
   const VertexNormalMap& deskewedScan() const { return deskewed_; }
+  // The same scan's points and normals as measured (full resolution, each
+  // column in the lidar frame at its own time): what the map integrates, so
+  // the normals are computed once per scan for both.
+  const VertexNormalMap& measuredScan() const { return measured_; }
 
  private:
   void restart(const RangeImage& scan, uint64_t stamp_ns);
+  // Which physical limit a registered motion breaks ("" if none), against the
+  // current velocity for the acceleration.
+  std::string physicalLimitBroken(const Twist& twist, double dt_s) const;
   void moveColumns(const VertexNormalMap& measured, VertexNormalMap& moved) const;
   // From the scan and deskewed_ (its full-resolution map, deskewed when
   // `deskewed`).
@@ -99,6 +136,7 @@ class LidarOdometry {
   Eigen::Isometry3d keyframe_pose_ = Eigen::Isometry3d::Identity();  // T_odom_target
   Eigen::Matrix<double, 6, 1> twist_ = Eigen::Matrix<double, 6, 1>::Zero();  // [angular, linear], body frame
   bool has_target_ = false;
+  bool velocity_known_ = false;  // twist_ was measured since the last restart
   bool target_deskewed_ = false;
   uint64_t last_stamp_ns_ = 0;
   // Reused buffers: the scan's points as measured, deskewed, and the target.
