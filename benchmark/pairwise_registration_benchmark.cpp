@@ -76,7 +76,7 @@ using PointCloud = pcl::PointCloud<pcl::PointXYZ>;
 
 // Valid points with normals of a range image, voxel-downsampled (normals averaged, renormalised).
 PointNormalCloud::Ptr downsampledCloudWithNormals(const RangeImage& image, double voxel_m) {
-  registration::VertexNormalMap map;
+  VertexNormalMap map;
   computeVertexNormalMap(image, 1, {}, map);
   PointNormalCloud::Ptr cloud(new PointNormalCloud);
   for (std::size_t i = 0; i < map.points.size(); ++i) {

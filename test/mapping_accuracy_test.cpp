@@ -183,6 +183,7 @@ TsdfMap mapAnalyticScene(const simulation::TriangleMesh& scene, const std::vecto
       pose.world_from_lidar = scan.column_poses.front();
       pose.twist = twistBetween(scan.column_poses.front(), scan.column_poses.back(),
                                 simulator.columnTime(start, os0Model()->columns() - 1) - start);
+      pose.scan_time_ns = scanTime(scan.image, ScanTimeSource::kFirstValidColumn);
       const MapUpdate update = map.integrate(scan.image, pose);
       EXPECT_TRUE(update.integrated) << update.warning;
     }

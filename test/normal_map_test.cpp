@@ -1,7 +1,7 @@
 // Normals in the image domain against analytic scenes: a box room seen from
 // inside (every wall, floor and ceiling normal is known exactly) and a panel
 // in front of a far wall (a depth edge).
-#include "range_image_mapping/registration/normal_map.h"
+#include "range_image_mapping/normal_map.h"
 #include "range_image_mapping/simulation/lidar_simulator.h"
 #include "range_image_mapping/simulation/sensor_presets.h"
 
@@ -9,7 +9,7 @@
 
 #include <cmath>
 
-namespace range_image_mapping::registration {
+namespace range_image_mapping {
 namespace {
 
 constexpr double kDegree = M_PI / 180.0;
@@ -202,4 +202,4 @@ TEST(LevelPixelIndex, NearestLevelPixelForEveryStride) {
 }
 
 }  // namespace
-}  // namespace range_image_mapping::registration
+}  // namespace range_image_mapping

@@ -34,7 +34,7 @@ OctomapInsertionTime OctomapBaseline::insert(const RangeImage& scan, const Eigen
                                              const Twist& twist) {
   if (!scan.model || scan.column_order != ColumnOrder::kStaggered)
     throw std::invalid_argument("OctomapBaseline: the scan needs a model and staggered columns");
-  const bool moving = computeColumnMotion(scan, scanTime(scan), twist, column_motion_);
+  const bool moving = computeColumnMotion(scan, scanTime(scan, ScanTimeSource::kFirstValidColumn), twist, column_motion_);
   const Eigen::Isometry3f world_from_lidar_f = world_from_lidar.cast<float>();
   const LidarModel& model = *scan.model;
   octomap::Pointcloud cloud;

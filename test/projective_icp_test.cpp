@@ -330,7 +330,7 @@ TEST(ColumnMotion, DeskewInsideTheRegistrationRecoversAMovingScan) {
   }
   const simulation::InterpolatedTrajectory moving(times, poses);
   const simulation::SimulatedScan source = simulator.simulate(moving, 0.5, 1);
-  const uint64_t scan_time = scanTime(source.image);
+  const uint64_t scan_time = scanTime(source.image, ScanTimeSource::kFirstValidColumn);
   const Eigen::Isometry3d truth = first.inverse() * moving.pose(double(scan_time) * 1e-9);  // 0.3 m forward
 
   RegistrationOptions options;

@@ -94,6 +94,7 @@ inline SimulatedMappingSequence simulateMappingSequence(const MappingPreset& pre
     pose.world_from_lidar = scan.column_poses.front();
     const double sweep_s = simulator.columnTime(start, model.columns() - 1) - start;
     pose.twist = twistBetween(scan.column_poses.front(), scan.column_poses.back(), sweep_s);
+    pose.scan_time_ns = scanTime(scan.image, ScanTimeSource::kFirstValidColumn);
     for (int v = 0; v < model.rows(); ++v)
       for (int u = 0; u < model.columns(); ++u) {
         const float range = scan.true_range[std::size_t(v) * model.columns() + u];

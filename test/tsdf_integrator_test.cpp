@@ -5,7 +5,6 @@
 #include "range_image_mapping/mapping/tsdf_integrator.h"
 #include "range_image_mapping/ouster_metadata.h"
 #include "range_image_mapping/simulation/lidar_simulator.h"
-#include "range_image_mapping/simulation/scene_generator.h"
 #include "range_image_mapping/simulation/sensor_presets.h"
 #include "error_text.h"
 #include "test_data.h"
@@ -15,7 +14,6 @@
 
 #include <algorithm>
 #include <cstdio>
-#include <ctime>
 #include <cmath>
 #include <functional>
 #include <iostream>
@@ -87,7 +85,8 @@ Simulated simulate(const TriangleMesh& mesh, const simulation::Trajectory& traje
   const LidarSimulator simulator(model, caster, effects, 3);
   Simulated result;
   result.image = simulator.simulate(trajectory, 0.1, 1).image;
-  result.pose.world_from_lidar = trajectory.pose(scanTime(result.image) * 1e-9);
+  result.pose.scan_time_ns = scanTime(result.image, ScanTimeSource::kFirstValidColumn);
+  result.pose.world_from_lidar = trajectory.pose(result.pose.scan_time_ns * 1e-9);
   return result;
 }
 
@@ -884,62 +883,6 @@ TEST(TsdfIntegrator, PointStrideActivatesFromFewerPixels) {
   // 0.8 m blocks at 6 m: every fourth beam still crosses every block near the surface.
   EXPECT_GT(strided.blockCount(), 0.95 * full.blockCount());
   EXPECT_LE(strided.blockCount(), full.blockCount());
-}
-
-// ---------------------------------------------------------------- speed
-
-// Scans of the procedural town along the car route (OS1-128) and of the
-// indoor scene (OS0-128), 10 cm voxels, 30 m clip, as many threads as TBB
-// has: the time per frame the README reports.
-TEST(TsdfIntegrator, IntegrationSpeedOnProceduralScenes) {
-  struct Case {
-    const char* name;
-    simulation::SceneKind kind;
-    simulation::MotionProfile profile;
-    const char* sensor;
-  };
-  for (const Case& c : {Case{"outdoor car OS-1-128", simulation::SceneKind::kOutdoor, simulation::MotionProfile::kCar, "OS-1-128"},
-                        Case{"indoor cart OS-0-128", simulation::SceneKind::kIndoor, simulation::MotionProfile::kCart, "OS-0-128"}}) {
-    simulation::SceneOptions scene_options;
-    scene_options.kind = c.kind;
-    const simulation::Scene scene = simulation::generateScene(scene_options);
-    simulation::MotionOptions motion;
-    motion.profile = c.profile;
-    motion.duration_s = 4.0;
-    const auto trajectory = simulation::makeTrajectory(scene, motion);
-    const RayCaster caster(scene.mesh);
-    SensorEffects effects;
-    effects.range_noise_sigma_m = 0.01;
-    const LidarSimulator simulator(ousterModel(c.sensor), caster, effects, 1);
-    VoxelBlockGrid grid(gridOptions());
-    TsdfIntegrator integrator;
-    double activation = 0.0, integration = 0.0, cpu = 0.0;
-    std::size_t touched = 0;
-    constexpr int kFrames = 20;
-    SimulatedScan scan;
-    for (int frame = 0; frame < kFrames; ++frame) {
-      const double start = 0.5 + 0.1 * frame;
-      simulator.simulate(*trajectory, start, frame, scan);
-      ScanPose pose;
-      const double scan_time = scanTime(scan.image) * 1e-9;
-      pose.world_from_lidar = trajectory->pose(scan_time);
-      pose.twist = twistBetween(trajectory->pose(scan_time), trajectory->pose(scan_time + 0.01), 0.01);
-      const std::clock_t cpu_start = std::clock();
-      const IntegrationStatistics statistics = integrator.integrate(grid, scan.image, pose);
-      cpu += double(std::clock() - cpu_start) / CLOCKS_PER_SEC;
-      activation += statistics.activation_seconds;
-      integration += statistics.integration_seconds;
-      touched += statistics.blocks_touched;
-    }
-    const double per_frame = (activation + integration) / kFrames;
-    std::cout << c.name << ": " << per_frame * 1000 << " ms per frame (activation " << activation / kFrames * 1000
-              << " ms, integration " << integration / kFrames * 1000 << " ms; CPU time "
-              << cpu / kFrames * 1000 << " ms), " << touched / kFrames
-              << " blocks per frame, " << grid.blockCount() << " blocks, " << grid.memoryBytes() / 1e6
-              << " MB after " << kFrames << " frames\n";
-    // Loose: the machine is shared. The README has the figures.
-    EXPECT_LT(per_frame, 1.0);
-  }
 }
 
 }  // namespace

@@ -1,7 +1,7 @@
 #include "range_image_mapping/mapping/tsdf_integrator.h"
 
 #include "number_text.h"
-#include "range_image_mapping/registration/normal_map.h"
+#include "range_image_mapping/normal_map.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
@@ -289,7 +289,7 @@ struct TsdfIntegrator::Workspace {
   std::vector<ColumnMotion> column_motion_inverse;  // scan-time frame -> column-time frame
   std::vector<float> column_time;                   // seconds after the scan time
   std::vector<float> sample_weight;        // per pixel; empty: every sample weighs 1
-  registration::VertexNormalMap normals;   // point-to-plane distances and incidence weighting
+  VertexNormalMap normals;   // point-to-plane distances and incidence weighting
   std::vector<PixelPlane> pixel_planes;    // point-to-plane
   std::vector<uint8_t> near_seam;          // per column: no plane (moving sweeps)
   StaggerGuess stagger;                    // for the model below
@@ -474,7 +474,7 @@ void findColumnsNearTheSeam(const LidarModel& model, const std::vector<float>& c
 // as far as the neighbouring returns the normal was fitted to, and no
 // farther than the truncation past the range clip. No plane where the
 // normal may mix both ends of a moving sweep (near_seam, empty if still).
-void computePixelPlanes(const LidarModel& model, const RangeImage& scan, const registration::VertexNormalMap& normals,
+void computePixelPlanes(const LidarModel& model, const RangeImage& scan, const VertexNormalMap& normals,
                         float truncation, float min_range, float max_range, const std::vector<uint8_t>& near_seam,
                         std::vector<float>& pixel_angle, std::vector<PixelPlane>& planes) {
   computePixelAngles(model, pixel_angle);
@@ -511,13 +511,13 @@ TsdfIntegrator::TsdfIntegrator(TsdfIntegrator&&) noexcept = default;
 TsdfIntegrator& TsdfIntegrator::operator=(TsdfIntegrator&&) noexcept = default;
 
 IntegrationStatistics TsdfIntegrator::integrate(VoxelBlockGrid& grid, const RangeImage& scan,
-                                                const ScanPose& pose) {
-  return update(grid, scan, pose, 1.0f);
+                                                const ScanPose& pose, const VertexNormalMap* normals) {
+  return update(grid, scan, pose, 1.0f, normals);
 }
 
 IntegrationStatistics TsdfIntegrator::deintegrate(VoxelBlockGrid& grid, const RangeImage& scan,
                                                   const ScanPose& pose) {
-  return update(grid, scan, pose, -1.0f);
+  return update(grid, scan, pose, -1.0f, nullptr);
 }
 
 void TsdfIntegrator::validate(const VoxelBlockGrid& grid, const RangeImage& scan, const ScanPose& pose) const {
@@ -535,6 +535,10 @@ void TsdfIntegrator::validate(const VoxelBlockGrid& grid, const RangeImage& scan
                        std::to_string(pixels));
   if (!pose.world_from_lidar.matrix().allFinite()) throw MappingError("scan pose is not finite");
   if (!pose.twist.allFinite()) throw MappingError("scan twist is not finite");
+  if (pose.scan_time_ns == 0 && !pose.twist.isZero() &&
+      std::any_of(scan.column_timestamp_ns.begin(), scan.column_timestamp_ns.end(), [](uint64_t t) { return t != 0; }))
+    throw MappingError("scan pose has a twist but no scan_time_ns: the column motion needs the time the pose "
+                       "refers to (scanTime())");
   const Eigen::Matrix3d rotation = pose.world_from_lidar.linear();
   const double orthonormal_error = (rotation.transpose() * rotation - Eigen::Matrix3d::Identity()).norm();
   if (orthonormal_error > kOrthonormalTolerance || rotation.determinant() < 0.0)
@@ -549,8 +553,16 @@ void TsdfIntegrator::validate(const VoxelBlockGrid& grid, const RangeImage& scan
 }
 
 IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeImage& scan,
-                                             const ScanPose& pose, float sign) {
+                                             const ScanPose& pose, float sign,
+                                             const VertexNormalMap* given_normals) {
   validate(grid, scan, pose);
+  if (given_normals && (given_normals->stride != 1 || given_normals->rows != scan.rows() ||
+                        given_normals->columns != scan.columns() ||
+                        given_normals->points.size() != std::size_t(scan.rows()) * scan.columns() ||
+                        given_normals->normals.size() != given_normals->points.size()))
+    throw MappingError("the given normal map is not the scan's at full resolution (" +
+                       std::to_string(given_normals->rows) + " x " + std::to_string(given_normals->columns) +
+                       ", stride " + std::to_string(given_normals->stride) + ")");
   Workspace& work = *workspace_;
   IntegrationStatistics statistics;
   const uint64_t generation = grid.nextGeneration();
@@ -563,12 +575,12 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
 
   // Motion within the sweep: each column seen from where the sensor was when
   // it fired (scan_motion.h); none for a zero twist or without column times.
-  const bool moving = computeColumnMotion(scan, scanTime(scan), pose.twist, column_motion_);
+  const bool moving = computeColumnMotion(scan, pose.scan_time_ns, pose.twist, column_motion_);
   float time_tolerance_s = 0.0f, column_period_s = 0.0f;
   if (moving) {
     work.column_motion_inverse.resize(columns);
     work.column_time.resize(columns);
-    const uint64_t scan_time = scanTime(scan);
+    const uint64_t scan_time = pose.scan_time_ns;
     float earliest = 0.0f, latest = 0.0f;
     int timed_columns = 0;
     for (int u = 0; u < columns; ++u) {
@@ -594,12 +606,13 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
   // Image-domain normals (the normal map's own points and normals, lidar
   // frame of each column), for point-to-plane distances and incidence weights.
   const bool point_to_plane = options_.signed_distance == SignedDistance::kPointToPlane;
-  if (point_to_plane || options_.incidence_weighting)
-    registration::computeVertexNormalMap(scan, 1, registration::NormalMapOptions{}, work.normals);
+  if ((point_to_plane || options_.incidence_weighting) && !given_normals)
+    computeVertexNormalMap(scan, 1, NormalMapOptions{}, work.normals);
+  const VertexNormalMap& normals = given_normals ? *given_normals : work.normals;
   if (point_to_plane) {
     work.near_seam.clear();
     if (moving) findColumnsNearTheSeam(model, work.column_time, column_period_s, work.near_seam);
-    computePixelPlanes(model, scan, work.normals, truncation, min_range, max_range, work.near_seam, work.pixel_angle,
+    computePixelPlanes(model, scan, normals, truncation, min_range, max_range, work.near_seam, work.pixel_angle,
                        work.pixel_planes);
   }
 
@@ -619,7 +632,7 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
           weight *= (falloff_start / range) * (falloff_start / range);
         if (options_.incidence_weighting) {
           // Normals face the sensor, so cos(incidence) = -n . ray direction.
-          const float cosine = -work.normals.normals[i].dot(model.direction(u, v));
+          const float cosine = -normals.normals[i].dot(model.direction(u, v));
           weight *= std::isfinite(cosine) ? std::max(cosine, kMinimumIncidenceWeight) : kMinimumIncidenceWeight;
         }
         work.sample_weight[i] = weight;
@@ -720,7 +733,7 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
   const float mesh_min_weight = options_.mesh_min_weight;
   const float free_space_weight = options_.free_space_weight;
   const PixelPlane* planes = point_to_plane ? work.pixel_planes.data() : nullptr;
-  const Eigen::Vector3f* pixel_points = point_to_plane ? work.normals.points.data() : nullptr;
+  const Eigen::Vector3f* pixel_points = point_to_plane ? normals.points.data() : nullptr;
   const float plane_tolerance = float(kPlaneSeenToleranceVoxels * grid.voxelSize());
   const float plane_fill = float(options_.planeFillFor(grid.options()));
   const float plane_fill_squared = plane_fill * plane_fill;

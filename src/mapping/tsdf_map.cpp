@@ -45,7 +45,8 @@ TsdfMap::TsdfMap(TsdfMapOptions options)
       integrator_(options_.integrator),
       extractor_(options_.mesh) {}
 
-MapUpdate TsdfMap::integrate(const RangeImage& scan, const ScanPose& pose) {
+MapUpdate TsdfMap::integrate(const RangeImage& scan, const ScanPose& pose,
+                             const VertexNormalMap* normals) {
   MapUpdate update;
   const auto refuse = [&](std::string why) {
     ++scans_refused_;
@@ -77,7 +78,7 @@ MapUpdate TsdfMap::integrate(const RangeImage& scan, const ScanPose& pose) {
     }
   }
 
-  update.integration = integrator_.integrate(grid_, scan, pose);
+  update.integration = integrator_.integrate(grid_, scan, pose, normals);
   update.integrated = true;
   ++scans_integrated_;
   has_last_pose_ = true;

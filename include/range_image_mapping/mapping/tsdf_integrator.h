@@ -11,6 +11,7 @@
 #pragma once
 
 #include "range_image_mapping/mapping/voxel_block_grid.h"
+#include "range_image_mapping/normal_map.h"
 #include "range_image_mapping/range_image.h"
 #include "range_image_mapping/scan_motion.h"
 
@@ -32,7 +33,7 @@ enum class SignedDistance {
   kAlongRay,
   // Departs from eq. 9: d = n . (x - P(u, v)), the distance from the voxel x
   // to the plane through the pixel's point P with the pixel's image-domain
-  // normal n (registration/normal_map.h, facing the sensor). Exact for planar
+  // normal n (normal_map.h, facing the sensor). Exact for planar
   // surfaces at any incidence and between beam rings; eq. 9 where a pixel has
   // no normal (depth edges, thin structures). The plane stands for the
   // surface within the truncation along the ray; farther along it (up to the
@@ -109,14 +110,17 @@ struct TsdfIntegratorOptions {
   }
 };
 
-// Pose of a scan: T_world_lidar at the scan time (scanTime()), and the body
-// twist over the sweep. With a nonzero twist and column timestamps, a voxel is
-// projected into the sensor as it was when its column was measured (motion
-// compensation without resampling the image); a zero twist integrates the
-// scan as if it were taken at one instant.
+// Pose of a scan: T_world_lidar at the scan time, and the body twist over
+// the sweep. With a nonzero twist and column timestamps, a voxel is projected
+// into the sensor as it was when its column was measured (motion compensation
+// without resampling the image), relative to scan_time_ns; a zero twist
+// integrates the scan as if it were taken at one instant.
 struct ScanPose {
   Eigen::Isometry3d world_from_lidar = Eigen::Isometry3d::Identity();
   Twist twist = Twist::Zero();
+  // The time world_from_lidar refers to (scanTime()): needed with a nonzero
+  // twist and column times, refused as 0 then.
+  uint64_t scan_time_ns = 0;
 };
 
 struct IntegrationStatistics {
@@ -147,7 +151,11 @@ class TsdfIntegrator {
   // non-finite pose or twist, an image without a model, a destaggered image
   // or options that do not fit the grid; the grid is unchanged then. An image
   // without valid pixels integrates nothing. Bumps grid.nextGeneration().
-  IntegrationStatistics integrate(VoxelBlockGrid& grid, const RangeImage& scan, const ScanPose& pose);
+  // normals: the scan's full-resolution normal map (stride 1, as measured,
+  // not deskewed) where the caller has it already, e.g. the odometry's;
+  // computed here with default options otherwise.
+  IntegrationStatistics integrate(VoxelBlockGrid& grid, const RangeImage& scan, const ScanPose& pose,
+                                  const VertexNormalMap* normals = nullptr);
   // The checks integrate() makes first: throws MappingError naming the
   // problem (for callers that refuse a scan without an exception).
   void validate(const VoxelBlockGrid& grid, const RangeImage& scan, const ScanPose& pose) const;
@@ -157,7 +165,7 @@ class TsdfIntegrator {
 
  private:
   IntegrationStatistics update(VoxelBlockGrid& grid, const RangeImage& scan, const ScanPose& pose,
-                               float sign);
+                               float sign, const VertexNormalMap* normals);
   TsdfIntegratorOptions options_;
   // Reused between scans: the keys of the blocks this scan touches.
   std::vector<BlockKey> touched_keys_;

@@ -52,7 +52,9 @@ class TsdfMap {
 
   // Never throws for bad data: a non-finite pose or twist, a jump or an
   // unusable image is refused with a warning and the map stays as it was.
-  MapUpdate integrate(const RangeImage& scan, const ScanPose& pose);
+  // normals: as TsdfIntegrator::integrate().
+  MapUpdate integrate(const RangeImage& scan, const ScanPose& pose,
+                      const VertexNormalMap* normals = nullptr);
   // Re-meshes what changed since the last call.
   MeshUpdate updateMesh();
   const MeshExtractor& mesh() const { return extractor_; }

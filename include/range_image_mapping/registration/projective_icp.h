@@ -3,7 +3,7 @@
 // target point and normal found there form the pair. No k-d tree.
 #pragma once
 
-#include "range_image_mapping/registration/normal_map.h"
+#include "range_image_mapping/normal_map.h"
 #include "range_image_mapping/scan_motion.h"
 
 #include <Eigen/Geometry>

@@ -6,7 +6,7 @@
 
 #include <vector>
 
-namespace range_image_mapping::registration {
+namespace range_image_mapping {
 
 enum class NormalMethod {
   kCrossProduct,  // neighbouring pixels (right/left and up/down), Behley & Stachniss style
@@ -62,4 +62,4 @@ inline std::size_t levelPixelIndex(const VertexNormalMap& level, const Projected
 void computeVertexNormalMap(const RangeImage& image, int stride, const NormalMapOptions& options,
                             VertexNormalMap& out);
 
-}  // namespace range_image_mapping::registration
+}  // namespace range_image_mapping

@@ -1,4 +1,4 @@
-#include "range_image_mapping/registration/normal_map.h"
+#include "range_image_mapping/normal_map.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -10,7 +10,7 @@
 #include <stdexcept>
 #include <string>
 
-namespace range_image_mapping::registration {
+namespace range_image_mapping {
 namespace {
 
 const Eigen::Vector3f kInvalid = Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN());
@@ -264,4 +264,4 @@ void computeVertexNormalMap(const RangeImage& image, int stride, const NormalMap
   });
 }
 
-}  // namespace range_image_mapping::registration
+}  // namespace range_image_mapping
