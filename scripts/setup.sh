@@ -21,7 +21,7 @@ packages=(
   libnodeletlib-dev libnodeletlib-tools libnodelet-dev pluginlib-dev libtopic-tools-dev
   libtf2-ros-dev libtf2-eigen-dev libsensor-msgs-dev libnav-msgs-dev libvisualization-msgs-dev
   librostest-dev libgtest-dev libbenchmark-dev
-  libeigen3-dev libtbb-dev libjsoncpp-dev libpcap-dev libcli11-dev libpng-dev libssl-dev
+  libeigen3-dev libtbb-dev libjsoncpp-dev libpcap-dev libboost-program-options-dev libpng-dev libssl-dev
   libnanoflann-dev libembree-dev robin-map-dev gnuplot-nox libpcl-dev clang liboctomap-dev
   libstd-srvs-dev libdiagnostic-updater-dev libmessage-filters-dev libboost-dev
 )

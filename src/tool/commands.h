@@ -1,19 +1,19 @@
 // The rim subcommands: each file adds one to the application.
 #pragma once
 
-#include <CLI/CLI.hpp>
+#include "command_line.h"
 
 #include <string>
 #include <vector>
 
 namespace range_image_mapping::tool {
 
-void addDecodeCommand(CLI::App& app);
-void addEvalCommand(CLI::App& app);
-void addMapCommand(CLI::App& app);
-void addOdometryCommand(CLI::App& app);
-void addRunCommand(CLI::App& app);
-void addSimulateCommand(CLI::App& app);
+void addDecodeCommand(Command& rim);
+void addEvalCommand(Command& rim);
+void addMapCommand(Command& rim);
+void addOdometryCommand(Command& rim);
+void addRunCommand(Command& rim);
+void addSimulateCommand(Command& rim);
 
 // rim simulate's ready-made sequences (outdoor_car, indoor_cart, ...), which
 // rim run also takes as INPUT.

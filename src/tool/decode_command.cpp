@@ -110,25 +110,25 @@ int runDecode(const DecodeOptions& options) {
 
 }  // namespace
 
-void addDecodeCommand(CLI::App& app) {
+void addDecodeCommand(Command& rim) {
   auto options = std::make_shared<DecodeOptions>();
-  CLI::App* command = app.add_subcommand(
+  Command& command = rim.subcommand(
       "decode", "Decode an Ouster pcap: one PLY cloud (lidar frame, per-point row/col/range) and one "
                 "destaggered range-image PNG per complete scan");
-  command->add_option("capture", options->capture, "Ouster capture (.pcap)")->required()->check(CLI::ExistingFile);
-  command->add_option("--metadata,-m", options->metadata, "sensor metadata JSON (flat or nested)")
-      ->required()
-      ->check(CLI::ExistingFile);
-  command->add_option("--out,-o", options->output_directory, "output directory")->required();
-  command->add_option("--return", options->return_name, "which return of a dual-return profile")
-      ->check(CLI::IsMember({"first", "second"}));
-  command->add_flag("--include-incomplete", options->include_incomplete,
-                    "also write scans with missing columns (they stay invalid)");
-  command->add_option("--png-row-repeat", options->row_repeat,
-                      "repeat each PNG row this many times (default: 256 / beams)");
-  command->callback([options] {
+  command.option("capture", options->capture, "Ouster capture (.pcap)").required().check(existingFile());
+  command.option("--metadata,-m", options->metadata, "sensor metadata JSON (flat or nested)")
+      .required()
+      .check(existingFile());
+  command.option("--out,-o", options->output_directory, "output directory").required();
+  command.option("--return", options->return_name, "which return of a dual-return profile")
+      .check(oneOf({"first", "second"}));
+  command.flag("--include-incomplete", options->include_incomplete,
+               "also write scans with missing columns (they stay invalid)");
+  command.option("--png-row-repeat", options->row_repeat,
+                 "repeat each PNG row this many times (default: 256 / beams)");
+  command.callback([options] {
     const int status = runDecode(*options);
-    if (status != 0) throw CLI::RuntimeError("no complete scan in " + options->capture, status);
+    if (status != 0) throw CommandFailed("no complete scan in " + options->capture, status);
   });
 }
 

@@ -41,9 +41,9 @@ struct SurfaceOptions {
   OutputOptions output;
 };
 
-void addOutputOptions(CLI::App* command, OutputOptions& output) {
-  command->add_option("--json", output.json_path, "write the JSON report to this file ('-': standard output)");
-  command->add_option("--plots", output.plots_directory, "write plots and maps into this folder");
+void addOutputOptions(Command& command, OutputOptions& output) {
+  command.option("--json", output.json_path, "write the JSON report to this file ('-': standard output)");
+  command.option("--plots", output.plots_directory, "write plots and maps into this folder");
 }
 
 // The summary goes to standard output, unless the JSON does: then to standard error.
@@ -169,81 +169,71 @@ void runSurfaceEvaluation(const SurfaceOptions& options) {
   writeReport(options.output, surfaceReportJson(metrics, context), surfaceSummaryLine(metrics));
 }
 
-void addTrajectoryCommand(CLI::App* eval) {
+void addTrajectoryCommand(Command& eval) {
   auto options = std::make_shared<TrajectoryOptions>();
-  CLI::App* command = eval->add_subcommand(
+  Command& command = eval.subcommand(
       "traj", "Trajectory against ground truth: ATE after Umeyama alignment, KITTI-devkit RPE, "
               "frame-to-frame RPE, and the paper's pairwise errors at frame distances 1..10");
-  command->add_option("estimate", options->estimate, "estimated poses (KITTI 3x4 or TUM)")
-      ->required()
-      ->check(CLI::ExistingFile);
-  command->add_option("ground_truth", options->ground_truth, "ground-truth poses (KITTI 3x4 or TUM)")
-      ->required()
-      ->check(CLI::ExistingFile);
-  command->add_option("--format", options->format, "pose file format of both files")
-      ->check(CLI::IsMember({"auto", "kitti", "tum"}))
-      ->capture_default_str();
-  command->add_option("--max-time-difference", options->max_time_difference_s,
-                      "TUM: largest time difference of associated poses, s")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  CLI::Option* no_align = command->add_flag("--no-align", options->no_align,
-                                            "compare as given, without Umeyama alignment");
-  command->add_flag("--align-scale", options->align_scale, "align with scale (Sim(3)) instead of SE(3)")
-      ->excludes(no_align);
-  command->add_option("--rpe-lengths", options->rpe_lengths_m, "KITTI RPE segment lengths, m")
-      ->delimiter(',')
-      ->check(CLI::PositiveNumber);
-  command->add_option("--max-frame-distance", options->max_frame_distance,
-                      "pairwise errors at frame distances 1..this")
-      ->check(CLI::Range(1, 1000))
-      ->capture_default_str();
-  command->add_option("--pairs", options->pairs_per_distance,
-                      "pairs sampled per frame distance (all when fewer exist; the paper's M = 50)")
-      ->check(CLI::Range(1, 1'000'000))
-      ->capture_default_str();
-  command->add_option("--seed", options->seed, "seed of the pair sample")->capture_default_str();
+  command.option("estimate", options->estimate, "estimated poses (KITTI 3x4 or TUM)").required().check(existingFile());
+  command.option("ground_truth", options->ground_truth, "ground-truth poses (KITTI 3x4 or TUM)")
+      .required()
+      .check(existingFile());
+  command.option("--format", options->format, "pose file format of both files")
+      .check(oneOf({"auto", "kitti", "tum"}))
+      .showDefault();
+  command.option("--max-time-difference", options->max_time_difference_s,
+                 "TUM: largest time difference of associated poses, s")
+      .check(nonNegative())
+      .showDefault();
+  command.flag("--no-align", options->no_align, "compare as given, without Umeyama alignment");
+  command.flag("--align-scale", options->align_scale, "align with scale (Sim(3)) instead of SE(3)")
+      .excludes("--no-align");
+  command.option("--rpe-lengths", options->rpe_lengths_m, "KITTI RPE segment lengths, m").check(positive());
+  command.option("--max-frame-distance", options->max_frame_distance, "pairwise errors at frame distances 1..this")
+      .check(inRange(1, 1000))
+      .showDefault();
+  command.option("--pairs", options->pairs_per_distance,
+                 "pairs sampled per frame distance (all when fewer exist; the paper's M = 50)")
+      .check(inRange(1, 1'000'000))
+      .showDefault();
+  command.option("--seed", options->seed, "seed of the pair sample").showDefault();
   addOutputOptions(command, options->output);
-  command->callback([options] { runTrajectoryEvaluation(*options); });
+  command.callback([options] { runTrajectoryEvaluation(*options); });
 }
 
-void addSurfaceCommand(CLI::App* eval) {
+void addSurfaceCommand(Command& eval) {
   auto options = std::make_shared<SurfaceOptions>();
-  CLI::App* command = eval->add_subcommand(
+  Command& command = eval.subcommand(
       "mesh", "Reconstruction against ground truth (PLY mesh or cloud, OBJ mesh): precision, recall, "
               "F-score at a threshold, Chamfer distance; meshes are sampled over their area");
-  command->add_option("estimate", options->estimate, "reconstruction: PLY mesh or point cloud, or OBJ")
-      ->required()
-      ->check(CLI::ExistingFile);
-  command->add_option("ground_truth", options->ground_truth, "ground truth: PLY mesh or point cloud, or OBJ")
-      ->required()
-      ->check(CLI::ExistingFile);
-  CLI::Option* voxel = command->add_option("--voxel", options->voxel_m, "voxel size, m: threshold = 3 x voxel")
-                           ->check(CLI::PositiveNumber);
-  CLI::Option* threshold = command->add_option("--threshold", options->threshold_m,
-                                               "distance threshold of precision and recall, m")
-                               ->check(CLI::PositiveNumber)
-                               ->excludes(voxel);
-  command->add_option("--sample-spacing", options->sample_spacing_m,
-                      "mean spacing of mesh samples, m (default: threshold / 4)")
-      ->check(CLI::PositiveNumber);
-  command->add_option("--seed", options->seed, "seed of the mesh samples")->capture_default_str();
-  command->add_option("--max-samples", options->max_samples, "refuse meshes that need more samples")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
+  command.option("estimate", options->estimate, "reconstruction: PLY mesh or point cloud, or OBJ")
+      .required()
+      .check(existingFile());
+  command.option("ground_truth", options->ground_truth, "ground truth: PLY mesh or point cloud, or OBJ")
+      .required()
+      .check(existingFile());
+  command.option("--voxel", options->voxel_m, "voxel size, m: threshold = 3 x voxel").check(positive());
+  command.option("--threshold", options->threshold_m, "distance threshold of precision and recall, m")
+      .check(positive())
+      .excludes("--voxel");
+  command.option("--sample-spacing", options->sample_spacing_m, "mean spacing of mesh samples, m (default: threshold / 4)")
+      .check(positive());
+  command.option("--seed", options->seed, "seed of the mesh samples").showDefault();
+  command.option("--max-samples", options->max_samples, "refuse meshes that need more samples")
+      .check(positive())
+      .showDefault();
   addOutputOptions(command, options->output);
-  command->callback([options, voxel, threshold] {
-    if (voxel->count() == 0 && threshold->count() == 0)
-      throw CLI::ValidationError("rim eval mesh", "give --voxel (threshold 3 x voxel) or --threshold");
+  command.callback([options, &command] {
+    if (!command.given("--voxel") && !command.given("--threshold"))
+      throw UsageError("rim eval mesh: give --voxel (threshold 3 x voxel) or --threshold");
     runSurfaceEvaluation(*options);
   });
 }
 
 }  // namespace
 
-void addEvalCommand(CLI::App& app) {
-  CLI::App* eval = app.add_subcommand("eval", "Evaluate trajectories and reconstructions against ground truth");
-  eval->require_subcommand(1);
+void addEvalCommand(Command& rim) {
+  Command& eval = rim.subcommand("eval", "Evaluate trajectories and reconstructions against ground truth");
   addTrajectoryCommand(eval);
   addSurfaceCommand(eval);
 }

@@ -148,6 +148,7 @@ int runMap(const MapCommandOptions& options) {
     mapping::ScanPose pose;
     pose.world_from_lidar = poses[pending_index];
     pose.twist = options.no_deskew ? Twist::Zero() : twist;
+    pose.scan_time_ns = scanTime(pending, ScanTimeSource::kFirstValidColumn);
     const auto integrate_started = Clock::now();
     const mapping::MapUpdate update = map.integrate(pending, pose);
     const double seconds = secondsSince(integrate_started);
@@ -169,7 +170,8 @@ int runMap(const MapCommandOptions& options) {
     const std::size_t index = scans++;
     if (index < poses.size()) {
       if (has_pending) {
-        const double dt_s = (double(scanTime(scan)) - double(scanTime(pending))) * 1e-9;
+        const double dt_s = (double(scanTime(scan, ScanTimeSource::kFirstValidColumn)) -
+                             double(scanTime(pending, ScanTimeSource::kFirstValidColumn))) * 1e-9;
         twist = twistBetween(poses[pending_index], poses[index], dt_s);
         integratePending();
       }
@@ -242,37 +244,30 @@ int runMap(const MapCommandOptions& options) {
 
 }  // namespace
 
-void addMapCommand(CLI::App& app) {
+void addMapCommand(Command& rim) {
   auto options = std::make_shared<MapCommandOptions>();
   mapping::TsdfMapOptions& map = options->map;
   map.integrator.max_range_m = 30.0;
-  CLI::App* command = app.add_subcommand(
+  Command& command = rim.subcommand(
       "map",
       "TSDF map of a recording at known poses (paper section 4.2), written as a triangle mesh (PLY) "
       "with a JSON report; scans and poses are matched by index");
-  command->add_option("input", options->recording.input,
-                      "a folder from rim simulate, an Ouster pcap (with --metadata) or a KITTI velodyne folder")
-      ->required();
-  command->add_option("--poses", options->poses,
-                      "KITTI or TUM poses, one per scan in order (default: a rim simulate folder's ground truth)");
-  command->add_option("--poses-frame", options->poses_frame,
-                      "whose poses: lidar (the image's frame) or sensor (Ouster); default: what the file states, "
-                      "else lidar")
-      ->check(CLI::IsMember({"lidar", "sensor"}));
-  command->add_option("--out,-o", options->output, "mesh PLY")->required();
-  command->add_option("--json", options->json, "report: options, counts, timing, memory, evaluation");
-  command->add_option("--eval", options->eval,
-                      "ground-truth surface (PLY/OBJ mesh or cloud): precision, recall and F-score at 3 voxels");
-  command->add_option("--metadata", options->recording.metadata, "Ouster metadata JSON of the pcap")
-      ->check(CLI::ExistingFile);
-  command->add_flag("--kitti", options->recording.kitti, "INPUT is a KITTI velodyne folder (synthetic HDL-64E model)");
-  command->add_option("--frames", options->recording.frames, "map only the first N scans")
-      ->check(CLI::PositiveNumber);
-  command->add_flag("--no-deskew", options->no_deskew,
-                    "integrate each scan as if taken at one instant (default: the twist between its pose and the "
-                    "next moves every column)");
+  command.option("--poses", options->poses,
+                 "KITTI or TUM poses, one per scan in order (default: a rim simulate folder's ground truth)");
+  command.option("--poses-frame", options->poses_frame,
+                 "whose poses: lidar (the image's frame) or sensor (Ouster); default: what the file states, "
+                 "else lidar")
+      .check(oneOf({"lidar", "sensor"}));
+  command.option("--out,-o", options->output, "mesh PLY").required();
+  command.option("--json", options->json, "report: options, counts, timing, memory, evaluation");
+  command.option("--eval", options->eval,
+                 "ground-truth surface (PLY/OBJ mesh or cloud): precision, recall and F-score at 3 voxels");
+  addRecordingOptions(command, options->recording, kRecordingInputHelp, "map only the first N scans");
+  command.flag("--no-deskew", options->no_deskew,
+               "integrate each scan as if taken at one instant (default: the twist between its pose and the "
+               "next moves every column)");
   addMapOptions(command, map);
-  command->callback([options] { runMap(*options); });
+  command.callback([options] { runMap(*options); });
 }
 
 }  // namespace range_image_mapping::tool

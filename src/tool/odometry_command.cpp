@@ -103,27 +103,19 @@ int runOdometry(const OdometryCommandOptions& options) {
 
 }  // namespace
 
-void addOdometryCommand(CLI::App& app) {
+void addOdometryCommand(Command& rim) {
   auto options = std::make_shared<OdometryCommandOptions>();
-  CLI::App* command = app.add_subcommand(
+  Command& command = rim.subcommand(
       "odometry",
       "LiDAR odometry over a recording: KITTI and TUM poses (traj.txt, traj_tum.txt), per-frame "
       "statistics (traj_frames.csv) and a summary (traj_summary.json)");
-  command->add_option("input", options->recording.input,
-                      "a folder from rim simulate, an Ouster pcap (with --metadata) or a KITTI velodyne folder")
-      ->required();
-  command->add_option("--out,-o", options->output, "KITTI poses file; the other outputs are named after it")
-      ->required();
-  command->add_option("--metadata", options->recording.metadata, "Ouster metadata JSON of the pcap")
-      ->check(CLI::ExistingFile);
-  command->add_flag("--kitti", options->recording.kitti, "INPUT is a KITTI velodyne folder (synthetic HDL-64E model)");
-  command->add_option("--frames", options->recording.frames, "process only the first N scans")
-      ->check(CLI::PositiveNumber);
+  command.option("--out,-o", options->output, "KITTI poses file; the other outputs are named after it").required();
+  addRecordingOptions(command, options->recording, kRecordingInputHelp, "process only the first N scans");
   addOdometryOptions(command, options->odometry);
-  command->add_option("--frame", options->frame, "whose poses: lidar (the image's frame) or sensor (Ouster)")
-      ->capture_default_str()
-      ->check(CLI::IsMember({"lidar", "sensor"}));
-  command->callback([options] { runOdometry(*options); });
+  command.option("--frame", options->frame, "whose poses: lidar (the image's frame) or sensor (Ouster)")
+      .showDefault()
+      .check(oneOf({"lidar", "sensor"}));
+  command.callback([options] { runOdometry(*options); });
 }
 
 }  // namespace range_image_mapping::tool

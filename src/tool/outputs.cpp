@@ -55,45 +55,48 @@ Json::Value OdometryCommandLine::json() const {
   return json;
 }
 
-void addOdometryOptions(CLI::App* command, OdometryCommandLine& odometry) {
-  command->add_flag("--no-deskew", odometry.no_deskew, "register and map the scans as measured");
-  command->add_option("--deskew-passes", odometry.deskew_passes,
-                      "at most this many times a scan is deskewed again with the velocity its registration "
-                      "gave and registered again (0: deskewed with the previous step's velocity only)")
-      ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
-  command->add_option("--kernel-scale", odometry.kernel_scale_m,
-                      "robust kernel scale, m (paper: 0.5 outdoors, 0.2 indoors)")
-      ->capture_default_str()
-      ->check(CLI::PositiveNumber);
-  command->add_option("--max-correspondence-distance", odometry.max_correspondence_distance_m,
-                      "distance gate of a pair at full resolution, m (0: twice the kernel scale)")
-      ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
-  command->add_option("--keyframe-distance", odometry.keyframe_distance_m,
-                      "register to a keyframe renewed after this distance, m (0: previous scan)")
-      ->check(CLI::NonNegativeNumber);
-  command->add_option("--keyframe-angle", odometry.keyframe_angle_deg, "... or after this rotation, degrees")
-      ->check(CLI::NonNegativeNumber);
+void addRecordingOptions(Command& command, io::RecordingOptions& recording, const std::string& input_help,
+                         const std::string& frames_help) {
+  command.option("input", recording.input, input_help).required();
+  command.option("--metadata", recording.metadata, "Ouster metadata JSON of the pcap").check(existingFile());
+  command.flag("--kitti", recording.kitti, "INPUT is a KITTI velodyne folder (synthetic HDL-64E model)");
+  command.option("--frames", recording.frames, frames_help).check(positive());
 }
 
-void addMapOptions(CLI::App* command, mapping::TsdfMapOptions& map) {
-  command->add_option("--voxel", map.grid.voxel_size_m, "voxel size, m")->capture_default_str();
-  command->add_option("--truncation", map.integrator.truncation_m, "TSDF truncation, m (0: 3 voxels)")
-      ->capture_default_str();
-  command->add_option("--block-edge", map.grid.block_edge, "voxels per block edge: 8 or 16")->capture_default_str();
-  command->add_option("--min-range", map.integrator.min_range_m, "ignore returns closer than this, m")
-      ->capture_default_str();
-  command->add_option("--max-range", map.integrator.max_range_m, "ignore returns farther than this, m")
-      ->capture_default_str();
-  command->add_option("--stride", map.integrator.point_stride,
-                      "block activation reads every N-th pixel in rows and columns")
-      ->capture_default_str();
-  command->add_option("--max-weight", map.integrator.max_weight, "running-average weight cap")->capture_default_str();
-  command->add_option("--memory-radius", map.memory_radius_m,
-                      "drop blocks farther than this from the sensor, m (0: keep all); their mesh is kept")
-      ->capture_default_str();
-  command->add_flag("--intensity", map.grid.store_intensity, "store intensity in the voxels and the mesh");
+void addOdometryOptions(Command& command, OdometryCommandLine& odometry) {
+  command.flag("--no-deskew", odometry.no_deskew, "register and map the scans as measured");
+  command.option("--deskew-passes", odometry.deskew_passes,
+                 "at most this many times a scan is deskewed again with the velocity its registration "
+                 "gave and registered again (0: deskewed with the previous step's velocity only)")
+      .showDefault()
+      .check(nonNegative());
+  command.option("--kernel-scale", odometry.kernel_scale_m, "robust kernel scale, m (paper: 0.5 outdoors, 0.2 indoors)")
+      .showDefault()
+      .check(positive());
+  command.option("--max-correspondence-distance", odometry.max_correspondence_distance_m,
+                 "distance gate of a pair at full resolution, m (0: twice the kernel scale)")
+      .showDefault()
+      .check(nonNegative());
+  command.option("--keyframe-distance", odometry.keyframe_distance_m,
+                 "register to a keyframe renewed after this distance, m (0: previous scan)")
+      .check(nonNegative());
+  command.option("--keyframe-angle", odometry.keyframe_angle_deg, "... or after this rotation, degrees")
+      .check(nonNegative());
+}
+
+void addMapOptions(Command& command, mapping::TsdfMapOptions& map) {
+  command.option("--voxel", map.grid.voxel_size_m, "voxel size, m").showDefault();
+  command.option("--truncation", map.integrator.truncation_m, "TSDF truncation, m (0: 3 voxels)").showDefault();
+  command.option("--block-edge", map.grid.block_edge, "voxels per block edge: 8 or 16").showDefault();
+  command.option("--min-range", map.integrator.min_range_m, "ignore returns closer than this, m").showDefault();
+  command.option("--max-range", map.integrator.max_range_m, "ignore returns farther than this, m").showDefault();
+  command.option("--stride", map.integrator.point_stride, "block activation reads every N-th pixel in rows and columns")
+      .showDefault();
+  command.option("--max-weight", map.integrator.max_weight, "running-average weight cap").showDefault();
+  command.option("--memory-radius", map.memory_radius_m,
+                 "drop blocks farther than this from the sensor, m (0: keep all); their mesh is kept")
+      .showDefault();
+  command.flag("--intensity", map.grid.store_intensity, "store intensity in the voxels and the mesh");
 }
 
 Json::Value mapOptionsJson(const mapping::TsdfMapOptions& map, bool deskew) {

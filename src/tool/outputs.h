@@ -8,7 +8,8 @@
 #include "range_image_mapping/mapping/tsdf_map.h"
 #include "range_image_mapping/registration/lidar_odometry.h"
 
-#include <CLI/CLI.hpp>
+#include "command_line.h"
+
 #include <json/json.h>
 
 #include <fstream>
@@ -23,6 +24,13 @@ std::string siblingPath(const std::string& output, const std::string& suffix);
 // Pretty JSON; creates the folder; throws naming the file when it cannot write.
 void writeJsonFile(const std::string& path, const Json::Value& value);
 
+// The recording to read (rim odometry, rim map, rim run): the positional
+// input, --metadata, --kitti and --frames.
+constexpr const char* kRecordingInputHelp =
+    "a folder from rim simulate, an Ouster pcap (with --metadata) or a KITTI velodyne folder";
+void addRecordingOptions(Command& command, io::RecordingOptions& recording, const std::string& input_help,
+                         const std::string& frames_help);
+
 // Odometry settings on the command line (rim odometry, rim run).
 struct OdometryCommandLine {
   bool no_deskew = false;
@@ -34,10 +42,10 @@ struct OdometryCommandLine {
   registration::OdometryOptions options() const;
   Json::Value json() const;
 };
-void addOdometryOptions(CLI::App* command, OdometryCommandLine& odometry);
+void addOdometryOptions(Command& command, OdometryCommandLine& odometry);
 
 // Mapping settings on the command line (rim map, rim run), into the core's options.
-void addMapOptions(CLI::App* command, mapping::TsdfMapOptions& map);
+void addMapOptions(Command& command, mapping::TsdfMapOptions& map);
 Json::Value mapOptionsJson(const mapping::TsdfMapOptions& map, bool deskew);
 
 // One row per odometry step: time, cost, inliers, why a scan was not used.

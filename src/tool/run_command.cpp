@@ -57,9 +57,9 @@ double peakResidentMegabytes() {
 // The paper's settings (section 5): 4 cm voxels and a 10 m clip indoors,
 // 10 cm and 30 m outdoors, kernel scale 0.2 / 0.5 m. Options given on the
 // command line win.
-void applyEnvironment(const std::string& environment, const CLI::App& command, RunCommandOptions& options) {
+void applyEnvironment(const std::string& environment, const Command& command, RunCommandOptions& options) {
   const bool indoor = environment == "indoor";
-  const auto unset = [&](const char* name) { return command.get_option(name)->count() == 0; };
+  const auto unset = [&](const char* name) { return !command.given(name); };
   if (unset("--voxel")) options.map.grid.voxel_size_m = indoor ? 0.04 : 0.10;
   if (unset("--max-range")) options.map.integrator.max_range_m = indoor ? 10.0 : 30.0;
   if (unset("--kernel-scale")) options.odometry.kernel_scale_m = indoor ? 0.2 : 0.5;
@@ -144,7 +144,7 @@ Json::Value statisticsJson(std::vector<double> values) {
   return json;
 }
 
-int runPipeline(RunCommandOptions options, const CLI::App& command) {
+int runPipeline(RunCommandOptions options, const Command& command) {
   const auto started = Clock::now();
   const fs::path out(options.output_directory);
   fs::create_directories(out);
@@ -200,6 +200,7 @@ int runPipeline(RunCommandOptions options, const CLI::App& command) {
       mapping::ScanPose pose;
       pose.world_from_lidar = update.pose;
       if (options.odometry.options().deskew) pose.twist << update.angular_velocity, update.linear_velocity;
+      pose.scan_time_ns = update.stamp_ns;
       const auto integrate_started = Clock::now();
       const mapping::MapUpdate map_update = map.integrate(scan, pose);
       record.integrate_ms = 1e3 * secondsSince(integrate_started);
@@ -337,39 +338,34 @@ int runPipeline(RunCommandOptions options, const CLI::App& command) {
 
 }  // namespace
 
-void addRunCommand(CLI::App& app) {
+void addRunCommand(Command& rim) {
   auto options = std::make_shared<RunCommandOptions>();
-  CLI::App* command = app.add_subcommand(
+  Command& command = rim.subcommand(
       "run",
       "Odometry and TSDF mapping over a recording or a simulated preset, with no ROS master: trajectory "
       "(KITTI, TUM), mesh.ply, report.json and report.png in --out; against ground truth when there is some");
   std::string preset_names;
   for (const std::string& name : simulationPresetNames()) preset_names += (preset_names.empty() ? "" : ", ") + name;
-  command->add_option("input", options->recording.input,
+  command.option("--out,-o", options->output_directory, "output folder").required();
+  addRecordingOptions(command, options->recording,
                       "a folder from rim simulate, an Ouster pcap (with --metadata), a KITTI velodyne folder, or a "
-                      "preset to simulate first (" + preset_names + ")")
-      ->required();
-  command->add_option("--out,-o", options->output_directory, "output folder")->required();
-  command->add_option("--metadata", options->recording.metadata, "Ouster metadata JSON of the pcap")
-      ->check(CLI::ExistingFile);
-  command->add_flag("--kitti", options->recording.kitti, "INPUT is a KITTI velodyne folder (synthetic HDL-64E model)");
-  command->add_option("--frames", options->recording.frames, "process only the first N scans (a preset: simulate N)")
-      ->check(CLI::PositiveNumber);
-  command->add_option("--environment", options->environment,
-                      "indoor (4 cm voxels, 10 m clip, kernel 0.2 m) or outdoor (10 cm, 30 m, 0.5 m); default: "
-                      "the preset's, else outdoor")
-      ->check(CLI::IsMember({"indoor", "outdoor"}));
-  command->add_flag("--sensor-frame", options->sensor_frame, "write poses of the Ouster sensor frame");
-  command->add_option("--mesh-every", options->mesh_every, "update the mesh after every N scans")
-      ->capture_default_str()
-      ->check(CLI::PositiveNumber);
-  command->add_flag("--no-plot", options->no_plot, "do not draw report.png");
-  command->add_flag("--bag", options->simulate_bag,
-                    "a preset also writes sequence/packets.bag (Ouster packets), to replay through "
-                    "range_image_mapping.launch");
+                      "preset to simulate first (" + preset_names + ")",
+                      "process only the first N scans (a preset: simulate N)");
+  command.option("--environment", options->environment,
+                 "indoor (4 cm voxels, 10 m clip, kernel 0.2 m) or outdoor (10 cm, 30 m, 0.5 m); default: "
+                 "the preset's, else outdoor")
+      .check(oneOf({"indoor", "outdoor"}));
+  command.flag("--sensor-frame", options->sensor_frame, "write poses of the Ouster sensor frame");
+  command.option("--mesh-every", options->mesh_every, "update the mesh after every N scans")
+      .showDefault()
+      .check(positive());
+  command.flag("--no-plot", options->no_plot, "do not draw report.png");
+  command.flag("--bag", options->simulate_bag,
+               "a preset also writes sequence/packets.bag (Ouster packets), to replay through "
+               "range_image_mapping.launch");
   addOdometryOptions(command, options->odometry);
   addMapOptions(command, options->map);
-  command->callback([options, command] { runPipeline(*options, *command); });
+  command.callback([options, &command] { runPipeline(*options, command); });
 }
 
 }  // namespace range_image_mapping::tool

@@ -372,43 +372,41 @@ void simulatePreset(const std::string& preset, const std::string& directory, int
   runSimulate(options);
 }
 
-void addSimulateCommand(CLI::App& app) {
+void addSimulateCommand(Command& rim) {
   auto options = std::make_shared<SimulateOptions>();
-  CLI::App* command = app.add_subcommand(
-      "simulate", "Simulate a spinning LiDAR in a scene: sensor data plus exact ground truth");
-  command->add_option("--preset", options->preset, "ready-made sequence")
-      ->check(CLI::IsMember(simulationPresetNames()));
-  command->add_option("--out,-o", options->output_directory, "output directory")->required();
-  command->add_option("--frames", options->frames, "number of scans (default: the preset's)")
-      ->check(CLI::Range(1, 100000));
-  command->add_option("--seed", options->seed, "scene, motion and noise seed");
-  command->add_option("--sensor", options->sensor, "Ouster metadata JSON, OS-0-128, OS-1-128 or hdl64");
-  command->add_option("--scene", options->scene, "indoor, outdoor, or a PLY/OBJ mesh");
-  command->add_option("--motion", options->motion, "car, cart, handheld, or a KITTI/TUM pose file");
-  command->add_option("--formats", options->formats, "comma-separated: pcap, bag, points-bag, kitti");
-  command->add_option("--profile", options->profile, "Ouster UDP profile of the packets")
-      ->check(CLI::IsMember({"LEGACY", "RNG19_RFL8_SIG16_NIR16", "RNG19_RFL8_SIG16_NIR16_DUAL", "RNG15_RFL8_NIR8"}));
-  command->add_option("--cloud-layout", options->cloud_layout, "PointCloud2 layout in points.bag")
-      ->check(CLI::IsMember({"organized", "unorganized", "plain"}));
-  command->add_option("--noise", options->noise_sigma_m, "range noise sigma, metres")->check(CLI::Range(0.0, 1.0));
-  command->add_option("--dropout", options->dropout, "probability of a lost return")->check(CLI::Range(0.0, 1.0));
-  command->add_option("--min-range", options->min_range_m, "metres");
-  command->add_option("--max-range", options->max_range_m, "metres");
-  command->add_option("--divergence", options->divergence_rad, "beam divergence, radians");
-  command->add_flag("--no-motion-distortion", options->no_motion_distortion,
-                    "cast each whole scan from the pose at its first column");
-  command->add_option("--surface-spacing", options->surface_spacing_m,
-                      "spacing of the ground-truth surface samples, metres (default 0.02 indoors, 0.075 otherwise)")
-      ->check(CLI::Range(0.0, 1.0));
-  command->add_option("--seen-distance", options->seen_distance_m,
-                      "a surface sample is seen when a noise-free hit lies about this close, metres (default: the "
-                      "sample spacing, at least 0.02)")
-      ->check(CLI::Range(0.0, 1.0));
-  command->add_option("--surface-max-range", options->surface_max_range_m,
-                      "the ground-truth surface holds only what was seen this close, metres (0: all); e.g. a "
-                      "map's range clip")
-      ->check(CLI::NonNegativeNumber);
-  command->callback([options] { runSimulate(*options); });
+  Command& command =
+      rim.subcommand("simulate", "Simulate a spinning LiDAR in a scene: sensor data plus exact ground truth");
+  command.option("--preset", options->preset, "ready-made sequence").check(oneOf(simulationPresetNames()));
+  command.option("--out,-o", options->output_directory, "output directory").required();
+  command.option("--frames", options->frames, "number of scans (default: the preset's)").check(inRange(1, 100000));
+  command.option("--seed", options->seed, "scene, motion and noise seed");
+  command.option("--sensor", options->sensor, "Ouster metadata JSON, OS-0-128, OS-1-128 or hdl64");
+  command.option("--scene", options->scene, "indoor, outdoor, or a PLY/OBJ mesh");
+  command.option("--motion", options->motion, "car, cart, handheld, or a KITTI/TUM pose file");
+  command.option("--formats", options->formats, "comma-separated: pcap, bag, points-bag, kitti");
+  command.option("--profile", options->profile, "Ouster UDP profile of the packets")
+      .check(oneOf({"LEGACY", "RNG19_RFL8_SIG16_NIR16", "RNG19_RFL8_SIG16_NIR16_DUAL", "RNG15_RFL8_NIR8"}));
+  command.option("--cloud-layout", options->cloud_layout, "PointCloud2 layout in points.bag")
+      .check(oneOf({"organized", "unorganized", "plain"}));
+  command.option("--noise", options->noise_sigma_m, "range noise sigma, metres").check(inRange(0.0, 1.0));
+  command.option("--dropout", options->dropout, "probability of a lost return").check(inRange(0.0, 1.0));
+  command.option("--min-range", options->min_range_m, "metres");
+  command.option("--max-range", options->max_range_m, "metres");
+  command.option("--divergence", options->divergence_rad, "beam divergence, radians");
+  command.flag("--no-motion-distortion", options->no_motion_distortion,
+               "cast each whole scan from the pose at its first column");
+  command.option("--surface-spacing", options->surface_spacing_m,
+                 "spacing of the ground-truth surface samples, metres (default 0.02 indoors, 0.075 otherwise)")
+      .check(inRange(0.0, 1.0));
+  command.option("--seen-distance", options->seen_distance_m,
+                 "a surface sample is seen when a noise-free hit lies about this close, metres (default: the "
+                 "sample spacing, at least 0.02)")
+      .check(inRange(0.0, 1.0));
+  command.option("--surface-max-range", options->surface_max_range_m,
+                 "the ground-truth surface holds only what was seen this close, metres (0: all); e.g. a "
+                 "map's range clip")
+      .check(nonNegative());
+  command.callback([options] { runSimulate(*options); });
 }
 
 }  // namespace range_image_mapping::tool
