@@ -88,6 +88,33 @@ void toDisplayImage(const RangeImage& image, const std_msgs::Header& header, sen
   }
 }
 
+// The sensor model of PointCloud2 input, fixed by the parameters (nullptr
+// with intrinsics ring: it comes from the first cloud that has every ring).
+// Throws ParameterError naming the parameter that gives no model.
+LidarModelConstPtr cloudModel(const AdapterParameters& parameters, const ros::NodeHandle& private_node) {
+  switch (parameters.cloud_intrinsics) {
+    case CloudIntrinsicsSource::kSynthetic:
+      try {
+        return std::make_shared<const LidarModel>(
+            LidarIntrinsics::synthetic(parameters.rows, parameters.columns, parameters.fov_up_deg * M_PI / 180.0,
+                                       parameters.fov_down_deg * M_PI / 180.0));
+      } catch (const std::exception& error) {
+        throw ParameterError("parameters " + private_node.resolveName("rows") + ", columns, fov_up_deg and "
+                             "fov_down_deg give no sensor model: " + error.what());
+      }
+    case CloudIntrinsicsSource::kOuster:
+      try {
+        return std::make_shared<const LidarModel>(loadOusterMetadata(parameters.metadata_file).intrinsics);
+      } catch (const std::exception& error) {
+        throw ParameterError("parameter " + private_node.resolveName("metadata_file") + " ('" +
+                             parameters.metadata_file + "') gives no sensor model: " + error.what());
+      }
+    case CloudIntrinsicsSource::kRing:
+      break;
+  }
+  return nullptr;
+}
+
 }  // namespace
 
 class AdapterNodelet : public nodelet::Nodelet {
@@ -174,12 +201,10 @@ class AdapterNodelet : public nodelet::Nodelet {
 
 void AdapterNodelet::onInit() {
   ros::NodeHandle& node = getNodeHandle();
-  try {
+  startOrRefuseLoad(getName(), "Adapter", [&] {
     parameters_ = readAdapterParameters(getPrivateNodeHandle());
-  } catch (const std::exception& error) {
-    NODELET_ERROR("Adapter not started: %s", error.what());
-    return;
-  }
+    if (parameters_.input == AdapterInput::kPointCloud) cloud_model_ = cloudModel(parameters_, getPrivateNodeHandle());
+  });
   range_image_publisher_ = node.advertise<LidarRangeImage>("range_image", 4);
   if (parameters_.publish_cloud) cloud_publisher_ = node.advertise<sensor_msgs::PointCloud2>("cloud", 4);
   display_publisher_ = node.advertise<sensor_msgs::Image>("range_image_display", 2);
@@ -399,29 +424,8 @@ void AdapterNodelet::onIdleCheck(const ros::SteadyTimerEvent&) {
 // ------------------------------------------------------------ PointCloud2
 
 void AdapterNodelet::startPointCloudInput() {
-  try {
-    switch (parameters_.cloud_intrinsics) {
-      case CloudIntrinsicsSource::kSynthetic:
-        cloud_model_ = std::make_shared<const LidarModel>(LidarIntrinsics::synthetic(
-            parameters_.rows, parameters_.columns, parameters_.fov_up_deg * M_PI / 180.0,
-            parameters_.fov_down_deg * M_PI / 180.0));
-        break;
-      case CloudIntrinsicsSource::kOuster:
-        cloud_model_ =
-            std::make_shared<const LidarModel>(loadOusterMetadata(parameters_.metadata_file).intrinsics);
-        publishStaticTransform(cloud_model_->intrinsics());
-        break;
-      case CloudIntrinsicsSource::kRing:
-        break;  // from the first cloud that has every ring
-    }
-  } catch (const std::exception& error) {
-    NODELET_ERROR("Adapter not started: intrinsics %s: %s",
-                  parameters_.cloud_intrinsics == CloudIntrinsicsSource::kOuster
-                      ? ("from metadata_file " + parameters_.metadata_file).c_str()
-                      : "from parameters",
-                  error.what());
-    return;
-  }
+  if (parameters_.cloud_intrinsics == CloudIntrinsicsSource::kOuster)
+    publishStaticTransform(cloud_model_->intrinsics());
   input_subscriber_ = getNodeHandle().subscribe("points", parameters_.cloud_queue_size,
                                                 &AdapterNodelet::onPointCloud, this);
   NODELET_INFO("Adapter: PointCloud2 from %s, range images on %s", input_subscriber_.getTopic().c_str(),

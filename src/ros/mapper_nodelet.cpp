@@ -1,7 +1,7 @@
 // Mapper: range images in (the Adapter's shared pointers, same manager), each
-// with its pose from tf or from the Odometry nodelet; a TSDF map (paper
-// section 4.2) out as rviz markers of the mesh, the mesh vertices as a cloud,
-// and a PLY on request.
+// with its pose from tf or from the Odometry nodelet (PoseSource); a TSDF map
+// (paper section 4.2) out as rviz markers of the mesh (MeshMarkers), the mesh
+// vertices as a cloud, and a PLY on request.
 //
 // Every callback (images, odometry, services, timers, subscriber connections)
 // runs on the nodelet's single-threaded queue (getNodeHandle), so the members
@@ -12,7 +12,9 @@
 #include "range_image_mapping/LidarRangeImage.h"
 #include "range_image_mapping/SaveMesh.h"
 #include "range_image_mapping/mapping/tsdf_map.h"
+#include "range_image_mapping/ros/mesh_display.h"
 #include "range_image_mapping/ros/parameters.h"
+#include "range_image_mapping/ros/pose_source.h"
 #include "range_image_mapping/ros/range_image_conversions.h"
 #include "range_image_mapping/ros/statistics_window.h"
 #include "range_image_mapping/ros/steady_throttle.h"
@@ -27,11 +29,7 @@
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
 #include <sensor_msgs/PointCloud2.h>
-#include <sensor_msgs/point_cloud2_iterator.h>
 #include <std_srvs/Empty.h>
-#include <tf2_eigen/tf2_eigen.h>
-#include <tf2_ros/buffer.h>
-#include <tf2_ros/transform_listener.h>
 #include <visualization_msgs/MarkerArray.h>
 
 #include <boost/make_shared.hpp>
@@ -42,22 +40,13 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cmath>
-#include <deque>
 #include <filesystem>
 #include <memory>
 #include <optional>
 #include <string>
-#include <unordered_set>
-#include <vector>
 
 namespace range_image_mapping {
 namespace {
-
-using mapping::BlockKey;
-using mapping::BlockKeyHash;
-using ChunkKey = Eigen::Vector3i;  // a cube of marker_chunk_blocks^3 blocks
-using ChunkSet = std::unordered_set<ChunkKey, BlockKeyHash>;
 
 // Counts since the start; windows (log, diagnostics) are differences of two snapshots.
 struct MapperStatistics {
@@ -88,105 +77,6 @@ double secondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
-int floorDivide(int value, int divisor) {
-  return value >= 0 ? value / divisor : -((-value + divisor - 1) / divisor);
-}
-
-ChunkKey chunkOf(const BlockKey& block, int chunk_blocks) {
-  return {floorDivide(block.x(), chunk_blocks), floorDivide(block.y(), chunk_blocks),
-          floorDivide(block.z(), chunk_blocks)};
-}
-
-// Marker id of a chunk, so a chunk's update replaces its marker: x and y in
-// 12 bits each, z in 8 (two's complement, wrapped). Two chunks share an id
-// only 4096 chunks apart in x or y or 256 in z (chunks of 4 blocks of 8
-// voxels of 10 cm: 13 km and 820 m), which a bounded map never holds at once.
-int32_t markerId(const ChunkKey& key) {
-  const uint32_t x = uint32_t(key.x()) & 0xfffu, y = uint32_t(key.y()) & 0xfffu, z = uint32_t(key.z()) & 0xffu;
-  return int32_t((z << 24) | (y << 12) | x);
-}
-
-// A hue ramp from blue (0) through green to red (1).
-std_msgs::ColorRGBA rampColor(float t) {
-  t = std::clamp(t, 0.0f, 1.0f);
-  const float hue = (1.0f - t) * 240.0f / 60.0f;  // sector of the HSV hexagon, 4 = blue, 0 = red
-  const float x = 1.0f - std::abs(std::fmod(hue, 2.0f) - 1.0f);
-  std_msgs::ColorRGBA color;
-  color.a = 1.0f;
-  if (hue < 1.0f) color.r = 1.0f, color.g = x;
-  else if (hue < 2.0f) color.r = x, color.g = 1.0f;
-  else if (hue < 3.0f) color.g = 1.0f, color.b = x;
-  else color.g = x, color.b = 1.0f;
-  return color;
-}
-
-class MeshColoring {
- public:
-  explicit MeshColoring(const MapperParameters& parameters) : parameters_(parameters) {}
-
-  // rviz draws vertex-coloured triangle lists unlit, so a flat colour per
-  // height would hide every edge: the colour is shaded here with the SDF
-  // normal (half-Lambert, one light from above, so no face is black).
-  std_msgs::ColorRGBA color(const mapping::MeshChunk& chunk, int vertex) const {
-    std_msgs::ColorRGBA color;
-    if (parameters_.color_mode == MeshColorMode::kIntensity && !chunk.intensities.empty()) {
-      const float grey = std::clamp(chunk.intensities[vertex] / float(parameters_.intensity_color_max), 0.0f, 1.0f);
-      color.r = color.g = color.b = 0.15f + 0.85f * grey;
-      color.a = 1.0f;
-    } else {
-      const float z = chunk.vertices[vertex].z();
-      color = rampColor(float((z - parameters_.height_color_min_m) /
-                              (parameters_.height_color_max_m - parameters_.height_color_min_m)));
-    }
-    const Eigen::Vector3f light = Eigen::Vector3f(0.35f, 0.25f, 0.9f).normalized();
-    const float lambert = vertex < int(chunk.normals.size()) ? chunk.normals[vertex].dot(light) : 1.0f;
-    const float shade = 0.3f + 0.7f * (0.5f + 0.5f * lambert);
-    color.r *= shade;
-    color.g *= shade;
-    color.b *= shade;
-    return color;
-  }
-
- private:
-  const MapperParameters& parameters_;
-};
-
-// Mesh vertices at or below max_height as an unorganized x y z (and intensity) cloud.
-void meshVerticesToPointCloud2(const std::vector<const mapping::MeshChunk*>& chunks, bool with_intensity,
-                               double max_height, const std_msgs::Header& header, sensor_msgs::PointCloud2& cloud) {
-  std::size_t count = 0;
-  for (const mapping::MeshChunk* chunk : chunks)
-    for (const Eigen::Vector3f& vertex : chunk->vertices) count += vertex.z() <= max_height;
-  cloud.header = header;
-  sensor_msgs::PointCloud2Modifier modifier(cloud);
-  if (with_intensity)
-    modifier.setPointCloud2Fields(4, "x", 1, sensor_msgs::PointField::FLOAT32, "y", 1,
-                                  sensor_msgs::PointField::FLOAT32, "z", 1, sensor_msgs::PointField::FLOAT32,
-                                  "intensity", 1, sensor_msgs::PointField::FLOAT32);
-  else
-    modifier.setPointCloud2FieldsByString(1, "xyz");
-  modifier.resize(count);
-  cloud.height = 1;
-  cloud.width = static_cast<uint32_t>(count);
-  cloud.is_dense = true;
-  sensor_msgs::PointCloud2Iterator<float> x(cloud, "x"), y(cloud, "y"), z(cloud, "z");
-  std::optional<sensor_msgs::PointCloud2Iterator<float>> intensity;
-  if (with_intensity) intensity.emplace(cloud, "intensity");
-  for (const mapping::MeshChunk* chunk : chunks) {
-    for (std::size_t i = 0; i < chunk->vertices.size(); ++i) {
-      if (!(chunk->vertices[i].z() <= max_height)) continue;
-      *x = chunk->vertices[i].x();
-      *y = chunk->vertices[i].y();
-      *z = chunk->vertices[i].z();
-      ++x, ++y, ++z;
-      if (intensity) {
-        **intensity = i < chunk->intensities.size() ? chunk->intensities[i] : 0.0f;
-        ++*intensity;
-      }
-    }
-  }
-}
-
 // Refuses what TsdfMap::saveMesh could only fail on later, with a message
 // naming the problem.
 std::string unwritablePathReason(const std::string& path) {
@@ -204,10 +94,6 @@ std::string unwritablePathReason(const std::string& path) {
   return "";
 }
 
-// MarkerArray messages beyond this many triangles are split, so rviz and the
-// transport never see one huge message on a full re-send.
-constexpr std::size_t kTrianglesPerMessage = 500'000;
-
 }  // namespace
 
 class MapperNodelet : public nodelet::Nodelet {
@@ -218,26 +104,19 @@ class MapperNodelet : public nodelet::Nodelet {
   using ImageConstPtr = LidarRangeImage::ConstPtr;
   using Synchronizer = message_filters::TimeSynchronizer<LidarRangeImage, nav_msgs::Odometry>;
 
-  // Pose sources.
-  void onRangeImageTf(const ImageConstPtr& message);
-  void processPendingScans();
+  // Scans in: to the pose source, which answers each with its pose (onScanPose).
+  void onRangeImage(const ImageConstPtr& message);
   void onRangeImageWithOdometry(const ImageConstPtr& message, const nav_msgs::Odometry::ConstPtr& odometry);
   void onUnmatchedImage(const ImageConstPtr& message);
-  // T_base_lidar once tf has it, identity after lidar_transform_timeout.
-  const Eigen::Isometry3d* baseFromLidar(const std::string& base_frame, const std::string& lidar_frame);
+  void onScanPose(const LidarRangeImage& message, const PoseLookup& lookup);
 
-  void integrate(const LidarRangeImage& message, const Eigen::Isometry3d& world_from_lidar);
+  void integrate(const LidarRangeImage& message, const LidarPose& pose);
   void dropScan(const LidarRangeImage& message, const std::string& reason);
 
   // Mesh output.
   void onMeshTimer(const ros::SteadyTimerEvent&);
-  void updateMesh();  // the one caller of TsdfMap::updateMesh: every change lands in dirty_chunks_
-  void publishMeshChanges();
-  void publishFullMesh();
-  void appendChunkMarker(const ChunkKey& key, visualization_msgs::MarkerArray& markers, std::size_t& triangles);
-  void publishMarkers(visualization_msgs::MarkerArray& markers, std::size_t& triangles);
+  void updateMesh();  // the one caller of TsdfMap::updateMesh: every change reaches mesh_markers_
   void publishSurfacePoints();
-  visualization_msgs::Marker markerHeader(const ChunkKey& key) const;
 
   bool onSaveMesh(SaveMesh::Request& request, SaveMesh::Response& response);
   bool onReset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
@@ -247,7 +126,8 @@ class MapperNodelet : public nodelet::Nodelet {
 
   MapperParameters parameters_;
   std::unique_ptr<mapping::TsdfMap> map_;
-  std::unique_ptr<MeshColoring> coloring_;
+  std::unique_ptr<PoseSource> pose_source_;
+  std::unique_ptr<MeshMarkers> mesh_markers_;
   LidarModelCache models_;
 
   ros::Subscriber range_image_subscriber_;  // pose_source tf
@@ -256,32 +136,15 @@ class MapperNodelet : public nodelet::Nodelet {
   std::unique_ptr<Synchronizer> synchronizer_;
   ros::Publisher mesh_publisher_, surface_points_publisher_;
   ros::ServiceServer save_mesh_service_, reset_service_, republish_mesh_service_;
-  ros::SteadyTimer mesh_timer_, pending_timer_, statistics_timer_;
-  std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
-  std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
+  ros::SteadyTimer mesh_timer_, statistics_timer_;
   std::unique_ptr<WallClockDiagnostics> diagnostics_;
 
-  // pose_source tf: scans waiting for world_frame -> lidar at their stamp.
-  struct PendingScan {
-    ImageConstPtr message;
-    ros::SteadyTime arrived;
-  };
-  std::deque<PendingScan> pending_scans_;
-
-  // pose_source odometry: base -> lidar, looked up once per frame pair.
-  std::string base_frame_, lidar_frame_;
-  std::optional<Eigen::Isometry3d> base_from_lidar_;
-  ros::SteadyTime lidar_transform_wait_started_;
-
-  // The previous pose, for the twist over the sweep (deskew); its scan time on
-  // the sensor's clock (0 without column timestamps).
+  // The previous pose, for the twist over the sweep when the pose source
+  // gives none (tf); its scan time on the sensor's clock (0 without column
+  // timestamps).
   std::optional<Eigen::Isometry3d> last_pose_;
   ros::Time last_pose_stamp_;
   uint64_t last_sensor_time_ns_ = 0;
-
-  // Marker chunks changed since their last publication, and those rviz holds.
-  ChunkSet dirty_chunks_, published_chunks_;
-  bool full_resend_ = true;
 
   MapperStatistics statistics_;
   StatisticsWindow<MapperStatistics> log_window_, diagnostics_window_;
@@ -292,24 +155,20 @@ class MapperNodelet : public nodelet::Nodelet {
 void MapperNodelet::onInit() {
   ros::NodeHandle& node = getNodeHandle();
   ros::NodeHandle& private_node = getPrivateNodeHandle();
-  try {
+  startOrRefuseLoad(getName(), "Mapper", [&] {
     parameters_ = readMapperParameters(private_node);
     map_ = std::make_unique<mapping::TsdfMap>(parameters_.map);
-  } catch (const std::exception& error) {
-    // Loudly: the manager logs the failed load and `nodelet load` exits, so a
-    // launch file never runs a mapper that silently maps nothing.
-    NODELET_FATAL("Mapper not started: %s", error.what());
-    throw;
-  }
-  coloring_ = std::make_unique<MeshColoring>(parameters_);
-  tf_buffer_ = std::make_unique<tf2_ros::Buffer>(ros::Duration(30.0));
-  tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_);
+  });
+  pose_source_ = std::make_unique<PoseSource>(
+      node, parameters_, getName(),
+      [this](const LidarRangeImage& message, const PoseLookup& lookup) { onScanPose(message, lookup); });
+  mesh_markers_ = std::make_unique<MeshMarkers>(parameters_);
 
   // A late subscriber (rviz started after the mapper) gets everything at the
   // next mesh update; the others see the chunks again, which replace themselves.
   // The queue holds a full re-send split into messages (kTrianglesPerMessage).
   mesh_publisher_ = node.advertise<visualization_msgs::MarkerArray>(
-      "mesh", 16, [this](const ros::SingleSubscriberPublisher&) { full_resend_ = true; });
+      "mesh", 16, [this](const ros::SingleSubscriberPublisher&) { mesh_markers_->requestFullResend(); });
   surface_points_publisher_ = node.advertise<sensor_msgs::PointCloud2>("surface_points", 1);
   save_mesh_service_ = private_node.advertiseService("save_mesh", &MapperNodelet::onSaveMesh, this);
   reset_service_ = private_node.advertiseService("reset", &MapperNodelet::onReset, this);
@@ -324,14 +183,11 @@ void MapperNodelet::onInit() {
   mesh_timer_ = node.createSteadyTimer(ros::WallDuration(1.0 / parameters_.mesh_rate_hz),
                                        &MapperNodelet::onMeshTimer, this);
 
-  std::string pose_topic;
-  if (parameters_.pose_source == PoseSource::kTf) {
+  std::string image_topic;
+  if (parameters_.pose_source == PoseSourceType::kTf) {
     range_image_subscriber_ =
-        node.subscribe("range_image", parameters_.queue_size, &MapperNodelet::onRangeImageTf, this);
-    // Scans waiting for tf are retried at this period, not only when the next scan arrives.
-    pending_timer_ = node.createSteadyTimer(ros::WallDuration(0.02),
-                                            [this](const ros::SteadyTimerEvent&) { processPendingScans(); });
-    pose_topic = "tf " + parameters_.world_frame + " -> image frame";
+        node.subscribe("range_image", parameters_.queue_size, &MapperNodelet::onRangeImage, this);
+    image_topic = range_image_subscriber_.getTopic();
   } else {
     synchronized_image_subscriber_ =
         std::make_unique<message_filters::Subscriber<LidarRangeImage>>(node, "range_image", parameters_.queue_size);
@@ -344,81 +200,32 @@ void MapperNodelet::onInit() {
     // An image that leaves the synchronizer's queue unmatched had no odometry
     // (skipped by the Odometry, or the queue is too short for its latency).
     synchronizer_->registerDropCallback(boost::bind(&MapperNodelet::onUnmatchedImage, this, boost::placeholders::_1));
-    pose_topic = odometry_subscriber_->getTopic() + " (same stamp) and tf base -> lidar";
+    image_topic = synchronized_image_subscriber_->getTopic();
   }
+  std::string poses = pose_source_->description();
+  if (odometry_subscriber_) poses += ", odometry on " + odometry_subscriber_->getTopic();
   const mapping::TsdfMapOptions& map = parameters_.map;
   NODELET_INFO("Mapper: range images from %s, poses from %s, mesh on %s in %s; voxel %.3f m, blocks of %d^3, "
                "truncation %.3f m, range [%.1f, %.1f] m, %s",
-               parameters_.pose_source == PoseSource::kTf ? range_image_subscriber_.getTopic().c_str()
-                                                          : synchronized_image_subscriber_->getTopic().c_str(),
-               pose_topic.c_str(), mesh_publisher_.getTopic().c_str(), parameters_.world_frame.c_str(),
-               map.grid.voxel_size_m, map.grid.block_edge, map.integrator.truncationFor(map.grid),
-               map.integrator.min_range_m, map.integrator.max_range_m,
-               parameters_.deskew ? "deskewed with the twist between poses" : "no deskew");
+               image_topic.c_str(), poses.c_str(), mesh_publisher_.getTopic().c_str(),
+               parameters_.world_frame.c_str(), map.grid.voxel_size_m, map.grid.block_edge,
+               map.integrator.truncationFor(map.grid), map.integrator.min_range_m, map.integrator.max_range_m,
+               !parameters_.deskew                                     ? "no deskew"
+               : parameters_.pose_source == PoseSourceType::kOdometry ? "deskewed with the odometry's twist"
+                                                                       : "deskewed with the twist between poses");
 }
 
-// ------------------------------------------------------------ pose sources
+// ------------------------------------------------------------ scans and their poses
 
-void MapperNodelet::onRangeImageTf(const ImageConstPtr& message) {
+void MapperNodelet::onRangeImage(const ImageConstPtr& message) {
   ++statistics_.scans;
-  if (int(pending_scans_.size()) >= parameters_.queue_size) {
-    dropScan(*pending_scans_.front().message, "the queue of scans waiting for tf is full");
-    pending_scans_.pop_front();
-  }
-  pending_scans_.push_back({message, ros::SteadyTime::now()});
-  processPendingScans();
-}
-
-// In arrival order: a scan waits until tf has world_frame -> its frame at its
-// stamp (the odometry publishes it after processing the same scan), at most
-// tf_timeout of wall time.
-void MapperNodelet::processPendingScans() {
-  while (!pending_scans_.empty()) {
-    const PendingScan& scan = pending_scans_.front();
-    const LidarRangeImage& message = *scan.message;
-    std::string error;
-    if (tf_buffer_->canTransform(parameters_.world_frame, message.header.frame_id, message.header.stamp, &error)) {
-      try {
-        const Eigen::Isometry3d world_from_lidar = tf2::transformToEigen(
-            tf_buffer_->lookupTransform(parameters_.world_frame, message.header.frame_id, message.header.stamp));
-        const ImageConstPtr keep = scan.message;
-        pending_scans_.pop_front();
-        integrate(*keep, world_from_lidar);
-      } catch (const std::exception& lookup_error) {
-        dropScan(message, std::string("tf lookup failed: ") + lookup_error.what());
-        pending_scans_.pop_front();
-      }
-      continue;
-    }
-    if ((ros::SteadyTime::now() - scan.arrived).toSec() < parameters_.tf_timeout_s) return;
-    dropScan(message, "no transform " + parameters_.world_frame + " -> " + message.header.frame_id + " within " +
-                          std::to_string(parameters_.tf_timeout_s) + " s: " + error);
-    pending_scans_.pop_front();
-  }
+  pose_source_->addScan(message);
 }
 
 void MapperNodelet::onRangeImageWithOdometry(const ImageConstPtr& message,
                                              const nav_msgs::Odometry::ConstPtr& odometry) {
   ++statistics_.scans;
-  try {
-    if (odometry->header.frame_id != parameters_.world_frame) {
-      dropScan(*message, "the odometry is in frame '" + odometry->header.frame_id + "', world_frame is '" +
-                             parameters_.world_frame + "'");
-      return;
-    }
-    const Eigen::Isometry3d* base_from_lidar = baseFromLidar(odometry->child_frame_id, message->header.frame_id);
-    if (!base_from_lidar) {
-      dropScan(*message, "waiting for tf " + odometry->child_frame_id + " -> " + message->header.frame_id);
-      return;
-    }
-    Eigen::Isometry3d world_from_base;
-    tf2::fromMsg(odometry->pose.pose, world_from_base);
-    integrate(*message, world_from_base * *base_from_lidar);
-  } catch (const std::exception& error) {
-    ++statistics_.rejected;
-    if (error_log_.allow(parameters_.statistics_period_s))
-      NODELET_ERROR("range image stamped %.3f failed: %s", message->header.stamp.toSec(), error.what());
-  }
+  pose_source_->addScan(message, *odometry);
 }
 
 void MapperNodelet::onUnmatchedImage(const ImageConstPtr& message) {
@@ -427,34 +234,18 @@ void MapperNodelet::onUnmatchedImage(const ImageConstPtr& message) {
   dropScan(*message, "no odometry with the same stamp");
 }
 
-// The same rule as the Odometry nodelet: the static mount from tf, or the
-// identity (the base is the lidar) when tf has none after the timeout, so
-// both agree on what the odometry's pose means.
-const Eigen::Isometry3d* MapperNodelet::baseFromLidar(const std::string& base_frame, const std::string& lidar_frame) {
-  if (base_frame != base_frame_ || lidar_frame != lidar_frame_) {
-    base_frame_ = base_frame;
-    lidar_frame_ = lidar_frame;
-    base_from_lidar_.reset();
-    lidar_transform_wait_started_ = ros::SteadyTime::now();
-    if (lidar_frame.empty() || lidar_frame == base_frame) base_from_lidar_ = Eigen::Isometry3d::Identity();
+void MapperNodelet::onScanPose(const LidarRangeImage& message, const PoseLookup& lookup) {
+  if (!lookup.pose) {
+    dropScan(message, lookup.reason);
+    return;
   }
-  if (base_from_lidar_) return &*base_from_lidar_;
-  std::string error;
-  if (tf_buffer_->canTransform(base_frame, lidar_frame, ros::Time(0), &error)) {
-    base_from_lidar_ = tf2::transformToEigen(tf_buffer_->lookupTransform(base_frame, lidar_frame, ros::Time(0)));
-    const Eigen::Vector3d t = base_from_lidar_->translation();
-    NODELET_INFO("%s -> %s from tf: translation (%.3f, %.3f, %.3f) m", base_frame.c_str(), lidar_frame.c_str(),
-                 t.x(), t.y(), t.z());
-  } else if ((ros::SteadyTime::now() - lidar_transform_wait_started_).toSec() >=
-             parameters_.lidar_transform_timeout_s) {
-    base_from_lidar_ = Eigen::Isometry3d::Identity();
-    NODELET_WARN("no transform %s -> %s after %.1f s (%s): using the identity, so %s is the lidar",
-                 base_frame.c_str(), lidar_frame.c_str(), parameters_.lidar_transform_timeout_s, error.c_str(),
-                 base_frame.c_str());
-  } else {
-    return nullptr;
+  try {
+    integrate(message, *lookup.pose);
+  } catch (const std::exception& error) {
+    ++statistics_.rejected;
+    if (error_log_.allow(parameters_.statistics_period_s))
+      NODELET_ERROR("range image stamped %.3f failed: %s", message.header.stamp.toSec(), error.what());
   }
-  return &*base_from_lidar_;
 }
 
 void MapperNodelet::dropScan(const LidarRangeImage& message, const std::string& reason) {
@@ -467,7 +258,7 @@ void MapperNodelet::dropScan(const LidarRangeImage& message, const std::string& 
 
 // ------------------------------------------------------------ integration
 
-void MapperNodelet::integrate(const LidarRangeImage& message, const Eigen::Isometry3d& world_from_lidar) {
+void MapperNodelet::integrate(const LidarRangeImage& message, const LidarPose& lidar_pose) {
   RangeImage image;
   try {
     image = fromMessage(message, models_);
@@ -484,15 +275,20 @@ void MapperNodelet::integrate(const LidarRangeImage& message, const Eigen::Isome
   if (std::any_of(image.column_timestamp_ns.begin(), image.column_timestamp_ns.end(),
                   [](uint64_t t) { return t != 0; })) {
     image.stamp_ns = 0;
-    sensor_time_ns = scanTime(image);
+    sensor_time_ns = scanTime(image, ScanTimeSource::kFirstValidColumn);
   }
 
+  const Eigen::Isometry3d& world_from_lidar = lidar_pose.world_from_lidar;
   mapping::ScanPose pose;
   pose.world_from_lidar = world_from_lidar;
-  // The sweep's motion, assumed constant: the twist since the previous pose,
-  // over the time between the scans on the sensor's clock when both have
-  // one (receive stamps jitter with the load), else between header stamps.
-  if (parameters_.deskew && last_pose_ && message.header.stamp > last_pose_stamp_) {
+  pose.scan_time_ns = scanTime(image, ScanTimeSource::kFirstValidColumn);
+  // The sweep's motion, assumed constant: the odometry's twist, the one it
+  // deskewed the scan with; from tf, the twist since the previous pose, over
+  // the time between the scans on the sensor's clock when both have one
+  // (receive stamps jitter with the load), else between header stamps.
+  if (parameters_.deskew && lidar_pose.twist) {
+    pose.twist = *lidar_pose.twist;
+  } else if (parameters_.deskew && last_pose_ && message.header.stamp > last_pose_stamp_) {
     double dt_s = (message.header.stamp - last_pose_stamp_).toSec();
     if (sensor_time_ns > last_sensor_time_ns_ && last_sensor_time_ns_ != 0)
       dt_s = double(sensor_time_ns - last_sensor_time_ns_) * 1e-9;
@@ -503,7 +299,6 @@ void MapperNodelet::integrate(const LidarRangeImage& message, const Eigen::Isome
     last_pose_stamp_ = message.header.stamp;
     last_sensor_time_ns_ = sensor_time_ns;
   }
-
   const auto start = std::chrono::steady_clock::now();
   const mapping::MapUpdate update = map_->integrate(image, pose);
   statistics_.integration_seconds += secondsSince(start);
@@ -526,8 +321,7 @@ void MapperNodelet::updateMesh() {
   const mapping::MeshUpdate update = map_->updateMesh();
   statistics_.mesh_seconds += secondsSince(start);
   ++statistics_.mesh_updates;
-  for (const BlockKey& key : update.changed) dirty_chunks_.insert(chunkOf(key, parameters_.marker_chunk_blocks));
-  for (const BlockKey& key : update.removed) dirty_chunks_.insert(chunkOf(key, parameters_.marker_chunk_blocks));
+  mesh_markers_->noteChanges(update);
 }
 
 void MapperNodelet::onMeshTimer(const ros::SteadyTimerEvent&) {
@@ -539,113 +333,13 @@ void MapperNodelet::onMeshTimer(const ros::SteadyTimerEvent&) {
                    "voxel_size or a memory_radius keeps it smaller",
                    triangles, parameters_.triangle_warning);
     if (mesh_publisher_.getNumSubscribers() == 0)
-      full_resend_ = true;  // nobody holds the mesh: the next subscriber needs all of it
-    else if (full_resend_)
-      publishFullMesh();
+      mesh_markers_->forgetSubscribers();  // nobody holds the mesh: the next subscriber needs all of it
     else
-      publishMeshChanges();
-    dirty_chunks_.clear();
+      for (const MeshMarkers::Message& message : mesh_markers_->update(map_->mesh())) mesh_publisher_.publish(message);
     if (surface_points_publisher_.getNumSubscribers() > 0) publishSurfacePoints();
   } catch (const std::exception& error) {
     if (error_log_.allow(parameters_.statistics_period_s)) NODELET_ERROR("mesh update failed: %s", error.what());
   }
-}
-
-visualization_msgs::Marker MapperNodelet::markerHeader(const ChunkKey& key) const {
-  visualization_msgs::Marker marker;
-  marker.header.frame_id = parameters_.world_frame;
-  marker.ns = "mesh";
-  marker.id = markerId(key);
-  return marker;
-}
-
-// The chunk's triangles as one marker (ADD), or a DELETE when it lost them
-// and rviz holds it; nothing for a chunk that is empty and never was sent.
-void MapperNodelet::appendChunkMarker(const ChunkKey& key, visualization_msgs::MarkerArray& markers,
-                                      std::size_t& triangles) {
-  const int edge = parameters_.marker_chunk_blocks;
-  std::vector<const mapping::MeshChunk*> blocks;
-  std::size_t corners = 0;
-  for (int k = 0; k < edge; ++k)
-    for (int j = 0; j < edge; ++j)
-      for (int i = 0; i < edge; ++i)
-        if (const mapping::MeshChunk* chunk = map_->mesh().chunk(key * edge + BlockKey(i, j, k))) {
-          blocks.push_back(chunk);
-          corners += 3 * chunk->triangles.size();
-        }
-  // A triangle list repeats each vertex for every triangle using it.
-  visualization_msgs::Marker marker = markerHeader(key);
-  marker.points.reserve(corners);
-  marker.colors.reserve(corners);
-  const float max_height = float(parameters_.display_max_height_m);
-  for (const mapping::MeshChunk* chunk : blocks)
-    for (const Eigen::Vector3i& triangle : chunk->triangles) {
-      if (!(chunk->vertices[triangle[0]].z() <= max_height && chunk->vertices[triangle[1]].z() <= max_height &&
-            chunk->vertices[triangle[2]].z() <= max_height))
-        continue;
-      for (int corner = 0; corner < 3; ++corner) {
-        const Eigen::Vector3f& vertex = chunk->vertices[triangle[corner]];
-        geometry_msgs::Point point;
-        point.x = vertex.x();
-        point.y = vertex.y();
-        point.z = vertex.z();
-        marker.points.push_back(point);
-        marker.colors.push_back(coloring_->color(*chunk, triangle[corner]));
-      }
-    }
-  if (marker.points.empty()) {
-    if (published_chunks_.erase(key) == 0) return;
-    marker.action = visualization_msgs::Marker::DELETE;
-  } else {
-    marker.type = visualization_msgs::Marker::TRIANGLE_LIST;
-    marker.action = visualization_msgs::Marker::ADD;
-    marker.pose.orientation.w = 1.0;
-    marker.scale.x = marker.scale.y = marker.scale.z = 1.0;
-    marker.color.a = 1.0f;  // rviz takes the alpha of vertex-coloured triangles from here
-    triangles += marker.points.size() / 3;
-    published_chunks_.insert(key);
-  }
-  markers.markers.push_back(std::move(marker));
-}
-
-void MapperNodelet::publishMarkers(visualization_msgs::MarkerArray& markers, std::size_t& triangles) {
-  if (markers.markers.empty()) return;
-  const auto message = boost::make_shared<visualization_msgs::MarkerArray>();
-  message->markers.swap(markers.markers);
-  mesh_publisher_.publish(boost::shared_ptr<const visualization_msgs::MarkerArray>(message));
-  triangles = 0;
-}
-
-void MapperNodelet::publishMeshChanges() {
-  visualization_msgs::MarkerArray markers;
-  std::size_t triangles = 0;
-  for (const ChunkKey& key : dirty_chunks_) {
-    appendChunkMarker(key, markers, triangles);
-    if (triangles >= kTrianglesPerMessage) publishMarkers(markers, triangles);
-  }
-  publishMarkers(markers, triangles);
-}
-
-// DELETEALL first, so whatever a subscriber held (before a reset, from an
-// earlier run) goes, then every chunk that has triangles.
-void MapperNodelet::publishFullMesh() {
-  full_resend_ = false;
-  published_chunks_.clear();
-  visualization_msgs::MarkerArray markers;
-  visualization_msgs::Marker clear_all;
-  clear_all.header.frame_id = parameters_.world_frame;
-  clear_all.ns = "mesh";
-  clear_all.action = visualization_msgs::Marker::DELETEALL;
-  markers.markers.push_back(clear_all);
-  ChunkSet chunks;
-  for (const mapping::MeshChunk* chunk : map_->mesh().chunks())
-    if (!chunk->triangles.empty()) chunks.insert(chunkOf(chunk->key, parameters_.marker_chunk_blocks));
-  std::size_t triangles = 0;
-  for (const ChunkKey& key : chunks) {
-    appendChunkMarker(key, markers, triangles);
-    if (triangles >= kTrianglesPerMessage) publishMarkers(markers, triangles);
-  }
-  publishMarkers(markers, triangles);
 }
 
 void MapperNodelet::publishSurfacePoints() {
@@ -690,26 +384,17 @@ bool MapperNodelet::onSaveMesh(SaveMesh::Request& request, SaveMesh::Response& r
 
 bool MapperNodelet::onReset(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
   map_->reset();
-  pending_scans_.clear();
+  pose_source_->clear();
   last_pose_.reset();
-  dirty_chunks_.clear();
   // Subscribers drop the old mesh now; the next mesh update sends only new chunks.
-  published_chunks_.clear();
-  if (mesh_publisher_.getNumSubscribers() > 0) {
-    const auto message = boost::make_shared<visualization_msgs::MarkerArray>();
-    visualization_msgs::Marker clear_all;
-    clear_all.header.frame_id = parameters_.world_frame;
-    clear_all.ns = "mesh";
-    clear_all.action = visualization_msgs::Marker::DELETEALL;
-    message->markers.push_back(clear_all);
-    mesh_publisher_.publish(boost::shared_ptr<const visualization_msgs::MarkerArray>(message));
-  }
+  const MeshMarkers::Message clear_all = mesh_markers_->clear();
+  if (mesh_publisher_.getNumSubscribers() > 0) mesh_publisher_.publish(clear_all);
   NODELET_INFO("map reset: empty, the next scan starts a new map");
   return true;
 }
 
 bool MapperNodelet::onRepublishMesh(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
-  full_resend_ = true;  // at the next mesh update
+  mesh_markers_->requestFullResend();  // at the next mesh update
   return true;
 }
 

@@ -1,17 +1,19 @@
 // Odometry: range images in (the Adapter's shared pointers, same manager),
-// LiDAR odometry out as nav_msgs/Odometry, a bounded path, tf odom -> base_link
-// and optionally the deskewed cloud.
+// LiDAR odometry out as nav_msgs/Odometry (the pose of base_link and its
+// twist, the core's velocity carried through the lidar's mount), a bounded
+// path, tf odom -> base_link and optionally the deskewed cloud.
 //
 // Every callback (images, the reset service, timers) runs on the nodelet's
 // single-threaded queue (getNodeHandle), so the members need no locks. Nothing
 // thrown by bad input leaves a callback: it is counted and logged (throttled).
 #include "range_image_mapping/LidarRangeImage.h"
 #include "range_image_mapping/registration/lidar_odometry.h"
+#include "range_image_mapping/ros/lidar_mount.h"
 #include "range_image_mapping/ros/parameters.h"
+#include "range_image_mapping/ros/range_image_conversions.h"
 #include "range_image_mapping/ros/statistics_window.h"
 #include "range_image_mapping/ros/steady_throttle.h"
 #include "range_image_mapping/ros/wall_clock_diagnostics.h"
-#include "range_image_mapping/ros/range_image_conversions.h"
 
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <geometry_msgs/PoseStamped.h>
@@ -22,7 +24,6 @@
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
 #include <sensor_msgs/PointCloud2.h>
-#include <sensor_msgs/point_cloud2_iterator.h>
 #include <std_srvs/Empty.h>
 #include <tf2_eigen/tf2_eigen.h>
 #include <tf2_ros/buffer.h>
@@ -41,8 +42,6 @@
 
 namespace range_image_mapping {
 namespace {
-
-using Matrix6d = Eigen::Matrix<double, 6, 6>;
 
 // Counts since the start; windows (log, diagnostics) are differences of two snapshots.
 struct OdometryStatistics {
@@ -75,52 +74,6 @@ struct OdometryStatistics {
   }
 };
 
-// Covariance of a perturbation in the lidar frame, core order [rotation,
-// translation], as the covariance of the same perturbation of base_frame in
-// ROS order [x y z, roll pitch yaw]: the adjoint of T_base_lidar.
-Matrix6d baseCovariance(const Matrix6d& lidar_rotation_translation, const Eigen::Isometry3d& base_from_lidar) {
-  Matrix6d reorder = Matrix6d::Zero();  // [rotation, translation] -> [translation, rotation]
-  reorder.block<3, 3>(0, 3).setIdentity();
-  reorder.block<3, 3>(3, 0).setIdentity();
-  const Matrix6d lidar = reorder * lidar_rotation_translation * reorder.transpose();
-  const Eigen::Matrix3d rotation = base_from_lidar.linear();
-  const Eigen::Vector3d t = base_from_lidar.translation();
-  Eigen::Matrix3d t_cross;
-  t_cross << 0, -t.z(), t.y(), t.z(), 0, -t.x(), -t.y(), t.x(), 0;
-  Matrix6d adjoint = Matrix6d::Zero();
-  adjoint.block<3, 3>(0, 0) = rotation;
-  adjoint.block<3, 3>(0, 3) = t_cross * rotation;
-  adjoint.block<3, 3>(3, 3) = rotation;
-  return adjoint * lidar * adjoint.transpose();
-}
-
-void copyCovariance(const Matrix6d& covariance, boost::array<double, 36>& out) {
-  for (int r = 0; r < 6; ++r)
-    for (int c = 0; c < 6; ++c) out[r * 6 + c] = covariance(r, c);
-}
-
-// The finite points as an unorganized x y z cloud, reusing cloud's buffers.
-void pointsToPointCloud2(const std::vector<Eigen::Vector3f>& points, const std_msgs::Header& header,
-                         sensor_msgs::PointCloud2& cloud) {
-  const std::size_t count =
-      std::count_if(points.begin(), points.end(), [](const Eigen::Vector3f& p) { return p.allFinite(); });
-  cloud.header = header;
-  sensor_msgs::PointCloud2Modifier modifier(cloud);
-  modifier.setPointCloud2FieldsByString(1, "xyz");
-  modifier.resize(count);
-  cloud.height = 1;
-  cloud.width = static_cast<uint32_t>(count);
-  cloud.is_dense = true;
-  sensor_msgs::PointCloud2Iterator<float> x(cloud, "x"), y(cloud, "y"), z(cloud, "z");
-  for (const Eigen::Vector3f& point : points) {
-    if (!point.allFinite()) continue;
-    *x = point.x();
-    *y = point.y();
-    *z = point.z();
-    ++x, ++y, ++z;
-  }
-}
-
 }  // namespace
 
 class OdometryNodelet : public nodelet::Nodelet {
@@ -131,8 +84,6 @@ class OdometryNodelet : public nodelet::Nodelet {
   void onRangeImage(const LidarRangeImage::ConstPtr& message);
   bool onReset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
   void noteFrameCounter(const LidarRangeImage& message);
-  // T_base_lidar once tf has it, identity after lidar_transform_timeout.
-  const Eigen::Isometry3d* baseFromLidar(const std::string& lidar_frame);
   // step_s: time since the previous registered scan, 0 after a reset.
   void publish(const registration::OdometryUpdate& update, const std_msgs::Header& header,
                const Eigen::Isometry3d& base_from_lidar, double step_s);
@@ -152,12 +103,8 @@ class OdometryNodelet : public nodelet::Nodelet {
   std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
   std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;
+  std::unique_ptr<LidarMount> mount_;  // base_frame -> lidar frame
   std::unique_ptr<WallClockDiagnostics> diagnostics_;
-
-  // base_frame -> lidar frame, looked up once per lidar frame name.
-  std::string lidar_frame_;
-  std::optional<Eigen::Isometry3d> base_from_lidar_;
-  ros::SteadyTime lidar_transform_wait_started_;
 
   // ROS time at the previous scan, and whether it has gone back since the
   // last scan that belonged to the new time (a bag loop).
@@ -177,15 +124,13 @@ class OdometryNodelet : public nodelet::Nodelet {
 
 void OdometryNodelet::onInit() {
   ros::NodeHandle& node = getNodeHandle();
-  try {
+  startOrRefuseLoad(getName(), "Odometry", [&] {
     parameters_ = readOdometryParameters(getPrivateNodeHandle());
     odometry_ = std::make_unique<registration::LidarOdometry>(parameters_.odometry);
-  } catch (const std::exception& error) {
-    NODELET_ERROR("Odometry not started: %s", error.what());
-    return;
-  }
+  });
   tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
   tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_);
+  mount_ = std::make_unique<LidarMount>(*tf_buffer_, parameters_.lidar_transform_timeout_s, getName());
   if (parameters_.publish_tf) tf_broadcaster_ = std::make_unique<tf2_ros::TransformBroadcaster>();
 
   odometry_publisher_ = node.advertise<nav_msgs::Odometry>("odometry", 16);
@@ -282,7 +227,7 @@ void OdometryNodelet::onRangeImage(const LidarRangeImage::ConstPtr& message) {
                      message->frame_id, message->header.stamp.toSec(), last_published_stamp_.toSec());
       return;
     }
-    const Eigen::Isometry3d* base_from_lidar = baseFromLidar(message->header.frame_id);
+    const Eigen::Isometry3d* base_from_lidar = mount_->baseFromLidar(parameters_.base_frame, message->header.frame_id);
     if (!base_from_lidar) return;  // still waiting for tf
     publish(update, message->header, *base_from_lidar, step_s);
     if (deskewed_cloud_publisher_ && deskewed_cloud_publisher_.getNumSubscribers() > 0)
@@ -315,33 +260,6 @@ void OdometryNodelet::noteFrameCounter(const LidarRangeImage& message) {
   last_frame_counter_ = counter;
 }
 
-const Eigen::Isometry3d* OdometryNodelet::baseFromLidar(const std::string& lidar_frame) {
-  if (lidar_frame != lidar_frame_) {
-    lidar_frame_ = lidar_frame;
-    base_from_lidar_.reset();
-    lidar_transform_wait_started_ = ros::SteadyTime::now();
-    if (lidar_frame.empty() || lidar_frame == parameters_.base_frame) base_from_lidar_ = Eigen::Isometry3d::Identity();
-  }
-  if (base_from_lidar_) return &*base_from_lidar_;
-  std::string error;
-  if (tf_buffer_->canTransform(parameters_.base_frame, lidar_frame, ros::Time(0), &error)) {
-    base_from_lidar_ =
-        tf2::transformToEigen(tf_buffer_->lookupTransform(parameters_.base_frame, lidar_frame, ros::Time(0)));
-    const Eigen::Vector3d t = base_from_lidar_->translation();
-    NODELET_INFO("%s -> %s from tf: translation (%.3f, %.3f, %.3f) m", parameters_.base_frame.c_str(),
-                 lidar_frame.c_str(), t.x(), t.y(), t.z());
-  } else if ((ros::SteadyTime::now() - lidar_transform_wait_started_).toSec() >=
-             parameters_.lidar_transform_timeout_s) {
-    base_from_lidar_ = Eigen::Isometry3d::Identity();
-    NODELET_WARN("no transform %s -> %s after %.1f s (%s): using the identity, so %s is the lidar",
-                 parameters_.base_frame.c_str(), lidar_frame.c_str(), parameters_.lidar_transform_timeout_s,
-                 error.c_str(), parameters_.base_frame.c_str());
-  } else {
-    return nullptr;
-  }
-  return &*base_from_lidar_;
-}
-
 void OdometryNodelet::publish(const registration::OdometryUpdate& update, const std_msgs::Header& header,
                               const Eigen::Isometry3d& base_from_lidar, double step_s) {
   // odom is base_frame at the first scan: T_odom_base = T_base_lidar T_odom_lidar T_lidar_base.
@@ -357,17 +275,18 @@ void OdometryNodelet::publish(const registration::OdometryUpdate& update, const 
   odometry->header.frame_id = parameters_.odom_frame;
   odometry->child_frame_id = parameters_.base_frame;
   odometry->pose.pose = tf2::toMsg(odom_from_base);
-  const Matrix6d covariance = baseCovariance(update.covariance, base_from_lidar);
-  copyCovariance(covariance, odometry->pose.covariance);
-  // Velocity of the base origin in base_frame: v_lidar moved by the lever arm.
-  const Eigen::Vector3d angular = base_from_lidar.linear() * update.angular_velocity;
-  const Eigen::Vector3d linear =
-      base_from_lidar.linear() * update.linear_velocity - angular.cross(base_from_lidar.translation());
-  tf2::toMsg(linear, odometry->twist.twist.linear);
-  tf2::toMsg(angular, odometry->twist.twist.angular);
+  // The lidar's motion as the base's, in base_frame (nav_msgs: the twist is
+  // in child_frame_id): the pose perturbation's covariance and the body twist
+  // both change frame with the mount's adjoint.
+  const Matrix6d covariance = covarianceInFrame(base_from_lidar, update.covariance);
+  toCovarianceMessage(covariance, odometry->pose.covariance);
+  Twist lidar_twist;
+  lidar_twist << update.angular_velocity, update.linear_velocity;
+  odometry->twist.twist = toTwistMessage(twistInFrame(base_from_lidar, lidar_twist));
   // The registration's covariance is that of one step: divided by the step's
   // squared duration, the velocity's. Unknown (the core's identity) otherwise.
-  copyCovariance(step_s > 0.0 ? Matrix6d(covariance / (step_s * step_s)) : covariance, odometry->twist.covariance);
+  toCovarianceMessage(step_s > 0.0 ? Matrix6d(covariance / (step_s * step_s)) : covariance,
+                      odometry->twist.covariance);
   odometry_publisher_.publish(boost::shared_ptr<const nav_msgs::Odometry>(odometry));
 
   if (tf_broadcaster_) {
@@ -396,7 +315,7 @@ void OdometryNodelet::publish(const registration::OdometryUpdate& update, const 
 
 void OdometryNodelet::publishDeskewedCloud(const std_msgs::Header& header) {
   const auto cloud = boost::make_shared<sensor_msgs::PointCloud2>();
-  pointsToPointCloud2(odometry_->deskewedScan().points, header, *cloud);
+  pointsToPointCloud2(odometry_->deskewedScan().points, nullptr, header, *cloud);
   deskewed_cloud_publisher_.publish(boost::shared_ptr<const sensor_msgs::PointCloud2>(cloud));
 }
 
@@ -406,7 +325,6 @@ void OdometryNodelet::clearTrajectory() {
 }
 
 bool OdometryNodelet::onReset(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
-  if (!odometry_) return false;
   odometry_->reset();
   clearTrajectory();
   last_frame_counter_.reset();
@@ -432,9 +350,7 @@ void OdometryNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
   status.add("rejected messages", window.rejected);
   status.add("condition number", last_update_.condition_number);
   status.add("last warning", last_warning_);
-  if (!odometry_)
-    status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "not started: bad parameters");
-  else if (window.frames == 0)
+  if (window.frames == 0)
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "no range images");
   else if (window.degenerate + window.dropped_frames + window.out_of_order + window.rejected + window.skipped > 0)
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN,

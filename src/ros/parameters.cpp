@@ -1,6 +1,7 @@
 #include "range_image_mapping/ros/parameters.h"
 
 #include <XmlRpcValue.h>
+#include <ros/console.h>
 
 #include <cmath>
 #include <limits>
@@ -29,6 +30,18 @@ std::string toText(Number value) {
 }
 
 }  // namespace
+
+void startOrRefuseLoad(const std::string& nodelet_name, const std::string& kind,
+                       const std::function<void()>& start) {
+  try {
+    start();
+  } catch (const std::exception& error) {
+    // Loudly and here: nodelet's Loader logs only "Failed to initialize
+    // nodelet", without the reason.
+    ROS_FATAL_NAMED(nodelet_name, "%s not started: %s", kind.c_str(), error.what());
+    throw;
+  }
+}
 
 std::string ParameterReader::fullName(const std::string& name) const {
   return node_.resolveName(name);
@@ -214,8 +227,8 @@ registration::RegistrationOptions readRegistrationOptions(const ParameterReader&
   options.kernel.alpha = reader.getDouble("kernel_alpha", defaults.kernel.alpha, -1e6, 2.0);
   options.normals.method =
       reader.getChoice("normal_method", "cross_product", {"cross_product", "covariance"}) == "covariance"
-          ? registration::NormalMethod::kCovariance
-          : registration::NormalMethod::kCrossProduct;
+          ? NormalMethod::kCovariance
+          : NormalMethod::kCrossProduct;
   options.normals.window_radius = reader.getInt("normal_window_radius", defaults.normals.window_radius, 1, 16);
   options.normals.max_range_jump_ratio = static_cast<float>(
       reader.getDouble("max_range_jump_ratio", defaults.normals.max_range_jump_ratio, 1e-3, 10.0));
@@ -325,9 +338,9 @@ MapperParameters readMapperParameters(const ros::NodeHandle& private_node) {
   }
 
   parameters.world_frame = reader.getFrame("world_frame", defaults.world_frame);
-  parameters.pose_source =
-      reader.getChoice("pose_source", "tf", {"tf", "odometry"}) == "odometry" ? PoseSource::kOdometry
-                                                                              : PoseSource::kTf;
+  parameters.pose_source = reader.getChoice("pose_source", "tf", {"tf", "odometry"}) == "odometry"
+                               ? PoseSourceType::kOdometry
+                               : PoseSourceType::kTf;
   parameters.deskew = reader.getBool("deskew", defaults.deskew);
   parameters.max_time_gap_s = reader.getDouble("max_time_gap", defaults.max_time_gap_s, 1e-3, 3600.0);
   parameters.tf_timeout_s = reader.getDouble("tf_timeout", defaults.tf_timeout_s, 0.0, 60.0);

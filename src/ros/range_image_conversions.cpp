@@ -1,9 +1,12 @@
 #include "range_image_mapping/ros/range_image_conversions.h"
 
 #include <sensor_msgs/PointField.h>
+#include <sensor_msgs/point_cloud2_iterator.h>
 
+#include <algorithm>
 #include <cstring>
 #include <limits>
+#include <optional>
 #include <string>
 
 namespace range_image_mapping {
@@ -289,6 +292,38 @@ void toPointCloud2(const RangeImage& image, const std_msgs::Header& header,
   }
 }
 
+void pointsToPointCloud2(const std::vector<Eigen::Vector3f>& points, const std::vector<float>* intensities,
+                         const std_msgs::Header& header, sensor_msgs::PointCloud2& cloud) {
+  const std::size_t count =
+      std::count_if(points.begin(), points.end(), [](const Eigen::Vector3f& p) { return p.allFinite(); });
+  cloud.header = header;
+  sensor_msgs::PointCloud2Modifier modifier(cloud);
+  if (intensities)
+    modifier.setPointCloud2Fields(4, "x", 1, sensor_msgs::PointField::FLOAT32, "y", 1,
+                                  sensor_msgs::PointField::FLOAT32, "z", 1, sensor_msgs::PointField::FLOAT32,
+                                  "intensity", 1, sensor_msgs::PointField::FLOAT32);
+  else
+    modifier.setPointCloud2FieldsByString(1, "xyz");
+  modifier.resize(count);
+  cloud.height = 1;
+  cloud.width = static_cast<uint32_t>(count);
+  cloud.is_dense = true;
+  sensor_msgs::PointCloud2Iterator<float> x(cloud, "x"), y(cloud, "y"), z(cloud, "z");
+  std::optional<sensor_msgs::PointCloud2Iterator<float>> intensity;
+  if (intensities) intensity.emplace(cloud, "intensity");
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    if (!points[i].allFinite()) continue;
+    *x = points[i].x();
+    *y = points[i].y();
+    *z = points[i].z();
+    ++x, ++y, ++z;
+    if (intensity) {
+      **intensity = (*intensities)[i];
+      ++*intensity;
+    }
+  }
+}
+
 void fromPointCloud2(const sensor_msgs::PointCloud2& cloud, PointCloudInput& input) {
   using sensor_msgs::PointField;
   checkCloudSizes(cloud);
@@ -331,6 +366,32 @@ void fromPointCloud2(const sensor_msgs::PointCloud2& cloud, PointCloudInput& inp
       if (time) input.time_offset_s[i] = static_cast<float>(time.read(point) * time_scale);
     }
   }
+}
+
+// ------------------------------------------------------------ motion
+
+geometry_msgs::Twist toTwistMessage(const Twist& twist) {
+  geometry_msgs::Twist message;
+  message.angular.x = twist[0];
+  message.angular.y = twist[1];
+  message.angular.z = twist[2];
+  message.linear.x = twist[3];
+  message.linear.y = twist[4];
+  message.linear.z = twist[5];
+  return message;
+}
+
+Twist fromTwistMessage(const geometry_msgs::Twist& message) {
+  Twist twist;
+  twist << message.angular.x, message.angular.y, message.angular.z, message.linear.x, message.linear.y,
+      message.linear.z;
+  return twist;
+}
+
+void toCovarianceMessage(const Eigen::Matrix<double, 6, 6>& covariance, boost::array<double, 36>& message) {
+  // Row/column r of the message is row/column (r + 3) % 6 of the core's.
+  for (int r = 0; r < 6; ++r)
+    for (int c = 0; c < 6; ++c) message[r * 6 + c] = covariance((r + 3) % 6, (c + 3) % 6);
 }
 
 // ------------------------------------------------------------ Ouster packets

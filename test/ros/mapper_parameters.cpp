@@ -3,6 +3,7 @@
 // with a bad parameter fails to load instead of running without a map. Needs
 // a master only for the parameter server.
 #include "error_text.h"
+#include "nodelet_loading.h"
 #include "range_image_mapping/ros/parameters.h"
 
 #include <gtest/gtest.h>
@@ -21,7 +22,7 @@ TEST(MapperParameters, DefaultsWhenNothingIsSet) {
   const MapperParameters parameters = readMapperParameters(ros::NodeHandle("~empty"));
   const mapping::TsdfMapOptions core;
   EXPECT_EQ(parameters.world_frame, "odom");
-  EXPECT_EQ(parameters.pose_source, PoseSource::kTf);
+  EXPECT_EQ(parameters.pose_source, PoseSourceType::kTf);
   EXPECT_TRUE(parameters.deskew);
   EXPECT_EQ(parameters.color_mode, MeshColorMode::kHeight);
   // The core's own defaults, untouched.
@@ -88,7 +89,7 @@ TEST(MapperParameters, ValuesReachTheCoreOptions) {
   EXPECT_EQ(parameters.map.max_pose_jump_m, 5.0);
   EXPECT_EQ(parameters.color_mode, MeshColorMode::kIntensity);
   EXPECT_TRUE(parameters.map.grid.store_intensity);  // intensity colours need intensity in the voxels
-  EXPECT_EQ(parameters.pose_source, PoseSource::kOdometry);
+  EXPECT_EQ(parameters.pose_source, PoseSourceType::kOdometry);
   EXPECT_EQ(parameters.world_frame, "map");
   EXPECT_FALSE(parameters.deskew);
   EXPECT_EQ(parameters.mesh_rate_hz, 5.0);
@@ -141,19 +142,16 @@ TEST(MapperParameters, BadValuesAreErrorsNamingTheParameter) {
   EXPECT_NE(chunk.find("marker_chunk_blocks is 0, expected within [1, 64]"), std::string::npos) << chunk;
 }
 
-// The nodelet refuses to start: Loader::load reports the exception of onInit.
+// The nodelet refuses to start, saying which parameter: Loader::load reports
+// the exception of onInit.
 TEST(MapperParameters, NodeletWithABadParameterFailsToLoad) {
+  const std::string mapper = "range_image_mapping/Mapper";
   nodelet::Loader loader(false);
-  const nodelet::M_string no_remappings;
-  const nodelet::V_string no_arguments;
-  ros::NodeHandle("/bad_mapper").setParam("block_edge", 12);
-  EXPECT_FALSE(loader.load("/bad_mapper", "range_image_mapping/Mapper", no_remappings, no_arguments));
-  ros::NodeHandle("/unknown_source_mapper").setParam("pose_source", "gps");
-  EXPECT_FALSE(loader.load("/unknown_source_mapper", "range_image_mapping/Mapper", no_remappings, no_arguments));
-  // The same nodelet with good parameters loads (so the failures above are the parameters').
+  test::expectRefused(loader, mapper, "/bad_mapper", "block_edge", 12, "block_edge");
+  test::expectRefused(loader, mapper, "/unknown_source_mapper", "pose_source", std::string("gps"),
+                      "Mapper not started: parameter /unknown_source_mapper/pose_source is 'gps'");
   ros::NodeHandle("/good_mapper").setParam("voxel_size", 0.2);
-  EXPECT_TRUE(loader.load("/good_mapper", "range_image_mapping/Mapper", no_remappings, no_arguments));
-  EXPECT_EQ(loader.listLoadedNodelets(), std::vector<std::string>{"/good_mapper"});
+  test::expectLoaded(loader, mapper, "/good_mapper");
   loader.clear();
 }
 

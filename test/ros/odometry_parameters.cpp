@@ -1,7 +1,9 @@
 // readOdometryParameters: defaults, values read into the core's options, and
-// bad values rejected with an error naming the parameter. Needs a master only
-// for the parameter server.
+// bad values rejected with an error naming the parameter; and an Odometry
+// nodelet with a bad parameter fails to load instead of running without an
+// odometry. Needs a master only for the parameter server.
 #include "error_text.h"
+#include "nodelet_loading.h"
 #include "range_image_mapping/ros/parameters.h"
 
 #include <gtest/gtest.h>
@@ -66,7 +68,7 @@ TEST(OdometryParameters, ValuesReachTheCoreOptions) {
   EXPECT_EQ(registration.kernel.type, registration::RobustKernel::Type::kBarron);
   EXPECT_EQ(registration.kernel.scale_m, 0.2);
   EXPECT_EQ(registration.kernel.alpha, 0.0);
-  EXPECT_EQ(registration.normals.method, registration::NormalMethod::kCovariance);
+  EXPECT_EQ(registration.normals.method, NormalMethod::kCovariance);
   EXPECT_FALSE(parameters.odometry.deskew);
   EXPECT_NEAR(parameters.odometry.keyframe_angle_rad, M_PI / 2, 1e-12);
   EXPECT_EQ(parameters.odometry.min_inliers, 50u);
@@ -96,6 +98,18 @@ TEST(OdometryParameters, BadValuesAreErrorsNamingTheParameter) {
   EXPECT_NE(flag.find("publish_tf must be true or false, got a int"), std::string::npos) << flag;
   const std::string gap = error_for("max_time_gap", 0.0);
   EXPECT_NE(gap.find("max_time_gap is 0"), std::string::npos) << gap;
+}
+
+// The nodelet refuses to start, saying which parameter.
+TEST(OdometryParameters, NodeletWithABadParameterFailsToLoad) {
+  const std::string odometry = "range_image_mapping/Odometry";
+  nodelet::Loader loader(false);
+  test::expectRefused(loader, odometry, "/bad_odometry", "kernel_scale", -0.5,
+                      "Odometry not started: parameter /bad_odometry/kernel_scale is -0.5");
+  test::expectRefused(loader, odometry, "/same_frames_odometry", "base_frame", std::string("odom"),
+                      "/same_frames_odometry/base_frame");
+  test::expectLoaded(loader, odometry, "/good_odometry");  // the defaults
+  loader.clear();
 }
 
 }  // namespace

@@ -1,10 +1,13 @@
 // A simulated Ouster sequence (rim simulate, written as a bag of raw packets)
 // replayed through odometry.launch: the odometry and tf must follow the
-// simulator's ground truth (ATE after SE(3) alignment), the tf chain odom ->
-// base_link -> lidar must exist and agree with the odometry messages, and the
-// covariances must be finite.
+// simulator's ground truth (ATE after SE(3) alignment), the twist must be the
+// ground truth's velocity of base_link in base_link (nav_msgs: the twist is
+// in child_frame_id), the tf chain odom -> base_link -> lidar must exist and
+// agree with the odometry messages, and the covariances must be finite.
 // write_odometry_bag.sh writes the sequence while roslaunch loads the test.
 #include "range_image_mapping/evaluation/trajectory_metrics.h"
+#include "range_image_mapping/ros/range_image_conversions.h"
+#include "range_image_mapping/scan_motion.h"
 
 #include "rostest_main.h"
 #include "spin_until.h"
@@ -25,6 +28,7 @@
 
 #include <Eigen/Geometry>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <iostream>
@@ -43,6 +47,8 @@ struct Settings {
   double timeout_s = 60.0;
   double max_ate_m = 0.1;
   double max_rotation_error_deg = 1.0;
+  double max_linear_velocity_error_mps = 0.1;    // rms over the scans
+  double max_angular_velocity_error_radps = 0.05;
   int min_frames = 25;
 };
 
@@ -59,6 +65,10 @@ Settings readSettings() {
   settings.timeout_s = private_node.param("timeout", settings.timeout_s);
   settings.max_ate_m = private_node.param("max_ate", settings.max_ate_m);
   settings.max_rotation_error_deg = private_node.param("max_rotation_error_deg", settings.max_rotation_error_deg);
+  settings.max_linear_velocity_error_mps =
+      private_node.param("max_linear_velocity_error", settings.max_linear_velocity_error_mps);
+  settings.max_angular_velocity_error_radps =
+      private_node.param("max_angular_velocity_error", settings.max_angular_velocity_error_radps);
   settings.min_frames = private_node.param("min_frames", settings.min_frames);
   return settings;
 }
@@ -219,6 +229,42 @@ TEST(OdometrySimulated, FollowsTheGroundTruthOnTfAndOdometry) {
             << " deg); frame to frame " << result.frame_to_frame.translation_m.rmse << " m, "
             << result.frame_to_frame.rotation_deg.rmse << " deg rmse\n";
   EXPECT_LE(result.absolute_translation_m.rmse, settings.max_ate_m);
+
+  // Twist: the message's (base_link in base_link) against the ground truth's
+  // velocity of base_link, the central difference of its poses around the
+  // scan (T_world_lidar T_lidar_base). The lidar's own twist reported as the
+  // base's (no frame change: the 180 deg yaw of os_sensor -> os_lidar and the
+  // off-centre mount) must be far worse, so the check can tell them apart.
+  double linear_error2 = 0.0, angular_error2 = 0.0, unchanged_linear_error2 = 0.0;
+  int twists = 0;
+  for (std::size_t k = 2; k < odometry.size(); ++k) {  // the first scans' velocity is not measured yet
+    const double time_s = odometry[k]->header.stamp.toSec() - epoch_s;
+    const auto after = std::lower_bound(ground_truth.times_s.begin(), ground_truth.times_s.end(), time_s);
+    std::size_t i = std::size_t(after - ground_truth.times_s.begin());
+    if (i > 0 && (i == ground_truth.times_s.size() ||
+                  time_s - ground_truth.times_s[i - 1] < ground_truth.times_s[i] - time_s))
+      --i;
+    if (i == 0 || i + 1 >= ground_truth.times_s.size() || std::abs(ground_truth.times_s[i] - time_s) > 0.03) continue;
+    const Eigen::Isometry3d lidar_from_base = base_from_lidar.inverse();
+    const Twist truth = twistBetween(ground_truth.poses[i - 1] * lidar_from_base,
+                                     ground_truth.poses[i + 1] * lidar_from_base,
+                                     ground_truth.times_s[i + 1] - ground_truth.times_s[i - 1]);
+    const Twist estimate = fromTwistMessage(odometry[k]->twist.twist);
+    const Twist lidar_estimate = twistInFrame(lidar_from_base, estimate);
+    angular_error2 += (estimate.head<3>() - truth.head<3>()).squaredNorm();
+    linear_error2 += (estimate.tail<3>() - truth.tail<3>()).squaredNorm();
+    unchanged_linear_error2 += (lidar_estimate.tail<3>() - truth.tail<3>()).squaredNorm();
+    ++twists;
+  }
+  ASSERT_GE(twists, settings.min_frames / 2) << "odometry messages with ground truth on both sides";
+  const double linear_rms = std::sqrt(linear_error2 / twists), angular_rms = std::sqrt(angular_error2 / twists);
+  const double unchanged_linear_rms = std::sqrt(unchanged_linear_error2 / twists);
+  std::cout << "twist of " << settings.base_frame << " over " << twists << " scans: rms error " << linear_rms
+            << " m/s, " << angular_rms << " rad/s (the lidar's twist unchanged: " << unchanged_linear_rms
+            << " m/s)\n";
+  EXPECT_LE(linear_rms, settings.max_linear_velocity_error_mps);
+  EXPECT_LE(angular_rms, settings.max_angular_velocity_error_radps);
+  EXPECT_GT(unchanged_linear_rms, 3 * linear_rms);
 
   // The reset service answers (the next scan would start at the identity).
   std_srvs::Empty reset;

@@ -1,6 +1,5 @@
-// The ROS-side conversions and parameter checks, without a running Adapter.
+// The ROS-side conversions, without a running nodelet.
 #include "error_text.h"
-#include "range_image_mapping/ros/parameters.h"
 #include "range_image_mapping/ros/range_image_conversions.h"
 
 #include <gtest/gtest.h>
@@ -360,65 +359,30 @@ TEST(OusterPacketMessage, OtherTypesAndBadLengthsAreRejected) {
   EXPECT_THROW(ousterPacketBytes(too_short, buffer), MessageConversionError);
 }
 
-// ------------------------------------------------------------ parameters
+// ------------------------------------------------------------ motion
 
-TEST(AdapterParameters, DefaultsWhenNothingIsSet) {
-  const AdapterParameters parameters = readAdapterParameters(ros::NodeHandle("~empty"));
-  const AdapterParameters defaults;
-  EXPECT_EQ(parameters.input, AdapterInput::kOusterPackets);
-  EXPECT_EQ(parameters.lidar_frame, "os_lidar");
-  EXPECT_EQ(parameters.sensor_frame, "os_sensor");
-  EXPECT_EQ(parameters.rows, defaults.rows);
-  EXPECT_EQ(parameters.columns, defaults.columns);
-  EXPECT_FALSE(parameters.publish_static_tf);
-}
+// The core orders twists [angular, linear] and covariances [rotation,
+// translation]; geometry_msgs puts the linear part first in both.
+TEST(MotionConversions, TwistsAndCovariancesChangeOrderNotValues) {
+  Twist twist;
+  twist << 0.1, 0.2, 0.3, 1.0, 2.0, 3.0;
+  const geometry_msgs::Twist message = toTwistMessage(twist);
+  EXPECT_EQ(message.angular.x, 0.1);
+  EXPECT_EQ(message.angular.z, 0.3);
+  EXPECT_EQ(message.linear.x, 1.0);
+  EXPECT_EQ(message.linear.z, 3.0);
+  EXPECT_EQ(fromTwistMessage(message), twist);
 
-TEST(AdapterParameters, ValuesAreReadAndCheckedByName) {
-  ros::NodeHandle node("~set");
-  node.setParam("input", "pointcloud");
-  node.setParam("intrinsics", "synthetic");
-  node.setParam("rows", 32);
-  node.setParam("columns", 1024);
-  node.setParam("fov_up_deg", 15);  // an integer where a double is expected is fine
-  node.setParam("fov_down_deg", -15.5);
-  node.setParam("publish_cloud", true);
-  node.setParam("organized_columns", "staggered");
-  const AdapterParameters parameters = readAdapterParameters(node);
-  EXPECT_EQ(parameters.input, AdapterInput::kPointCloud);
-  EXPECT_EQ(parameters.rows, 32);
-  EXPECT_EQ(parameters.columns, 1024);
-  EXPECT_EQ(parameters.fov_up_deg, 15.0);
-  EXPECT_EQ(parameters.fov_down_deg, -15.5);
-  EXPECT_TRUE(parameters.publish_cloud);
-  EXPECT_EQ(parameters.organized_column_order, ColumnOrder::kStaggered);
-}
-
-TEST(AdapterParameters, BadValuesAreErrorsNamingTheParameter) {
-  const auto error_for = [](const std::string& name, const auto& value) {
-    ros::NodeHandle node("~bad_" + name);
-    node.setParam(name, value);
-    return errorOf([&] { readAdapterParameters(node); });
-  };
-  const std::string rows_as_text = error_for("rows", std::string("sixty-four"));
-  EXPECT_NE(rows_as_text.find("/bad_rows/rows must be an integer, got a string"), std::string::npos)
-      << rows_as_text;
-  const std::string negative_columns = error_for("columns", -5);
-  EXPECT_NE(negative_columns.find("columns is -5, expected within [1, "), std::string::npos)
-      << negative_columns;
-  const std::string unknown_input = error_for("input", std::string("velodyne_packets"));
-  EXPECT_NE(unknown_input.find("input is 'velodyne_packets', expected one of: ouster_packets, pointcloud"),
-            std::string::npos)
-      << unknown_input;
-  const std::string text_bool = error_for("publish_cloud", std::string("yes"));
-  EXPECT_NE(text_bool.find("publish_cloud must be true or false"), std::string::npos) << text_bool;
-  const std::string fov = error_for("fov_up_deg", -30.0);
-  EXPECT_NE(fov.find("must be above"), std::string::npos) << fov;
-
-  ros::NodeHandle ouster_without_file("~ouster_without_file");
-  ouster_without_file.setParam("input", "pointcloud");
-  ouster_without_file.setParam("intrinsics", "ouster");
-  EXPECT_NE(errorOf([&] { readAdapterParameters(ouster_without_file); }).find("metadata_file"),
-            std::string::npos);
+  Eigen::Matrix<double, 6, 6> covariance;
+  for (int r = 0; r < 6; ++r)
+    for (int c = 0; c < 6; ++c) covariance(r, c) = 10 * r + c;
+  boost::array<double, 36> ros_order;
+  toCovarianceMessage(covariance, ros_order);
+  EXPECT_EQ(ros_order[0 * 6 + 0], covariance(3, 3));  // x x
+  EXPECT_EQ(ros_order[0 * 6 + 5], covariance(3, 2));  // x yaw
+  EXPECT_EQ(ros_order[5 * 6 + 0], covariance(2, 3));  // yaw x
+  EXPECT_EQ(ros_order[3 * 6 + 4], covariance(0, 1));  // roll pitch
+  EXPECT_EQ(ros_order[2 * 6 + 1], covariance(5, 4));  // z y
 }
 
 }  // namespace

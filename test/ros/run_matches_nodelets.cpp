@@ -3,8 +3,8 @@
 // range_image_mapping.launch (slowly, so the Odometry takes every scan) and
 // through `rim run` offline. They run the same core code on the same scans, so
 // the odometry poses, associated by scan time, must agree to float rounding
-// (the TBB reductions' order); the meshes, deskewed with the odometry's
-// velocity offline and with the twist between poses by the Mapper, must
+// (the TBB reductions' order); the meshes, both deskewed with the odometry's
+// velocity (the Mapper takes it from the odometry messages' twist), must
 // describe the same surface.
 //
 // Scan time, not the header stamp: the stamp is the receipt time of the
@@ -91,8 +91,7 @@ TEST(RunMatchesNodelets, SamePosesAsRimRunOnTheSameSequence) {
   ros::Subscriber image_subscriber = node.subscribe<LidarRangeImage>(
       "/range_image", 100, [&](const LidarRangeImage::ConstPtr& message) {
         RangeImage image = fromMessage(*message, models);
-        image.stamp_ns = 0;  // the first valid column's time, as the Odometry does
-        scan_time_s[message->header.stamp] = double(scanTime(image)) * 1e-9;
+        scan_time_s[message->header.stamp] = double(scanTime(image, ScanTimeSource::kFirstValidColumn)) * 1e-9;
       });
 
   // Until the replay is over: every scan, or no odometry for 5 s after enough.

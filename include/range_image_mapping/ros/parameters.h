@@ -1,6 +1,7 @@
 // The one place where the nodelets read and validate their ROS parameters.
 // Every parameter has a default; a value of the wrong type or out of range is
-// an error naming the parameter, never silently replaced by the default.
+// an error naming the parameter, never silently replaced by the default, and
+// the nodelet refuses to load (startOrRefuseLoad).
 #pragma once
 
 #include "range_image_mapping/mapping/tsdf_map.h"
@@ -9,6 +10,7 @@
 
 #include <ros/node_handle.h>
 
+#include <functional>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -20,6 +22,16 @@ class ParameterError : public std::invalid_argument {
  public:
   using std::invalid_argument::invalid_argument;
 };
+
+// A nodelet's start-up: `start` reads the parameters and builds what they
+// configure (the core objects check their options too). Anything it throws
+// refuses the load: logged as FATAL under the nodelet's name (`nodelet_name`,
+// from getName(); `kind` says which nodelet, e.g. "Mapper") and thrown on,
+// so nodelet::Loader::load fails, the manager's load service answers false
+// and `nodelet load` exits, instead of a nodelet that stays loaded doing
+// nothing. The message names the parameter (ParameterError).
+void startOrRefuseLoad(const std::string& nodelet_name, const std::string& kind,
+                       const std::function<void()>& start);
 
 // Typed getters on one node handle (usually the nodelet's private one).
 class ParameterReader {
@@ -107,8 +119,8 @@ OdometryParameters readOdometryParameters(const ros::NodeHandle& private_node);
 
 // ------------------------------------------------------------ Mapper nodelet
 
-// Where the pose of each range image comes from.
-enum class PoseSource {
+// Where the pose of each range image comes from (PoseSource, pose_source.h).
+enum class PoseSourceType {
   kTf,        // world_frame -> image frame on tf at the image's stamp
   kOdometry,  // the odometry topic at the same stamp, composed with base -> lidar from tf
 };
@@ -120,10 +132,11 @@ struct MapperParameters {
   // max_pose_jump (and intensity storage when color_mode is intensity).
   mapping::TsdfMapOptions map;
   std::string world_frame = "odom";
-  PoseSource pose_source = PoseSource::kTf;
-  // Motion compensation with the twist between consecutive poses.
+  PoseSourceType pose_source = PoseSourceType::kTf;
+  // Motion compensation: with the odometry's twist (pose_source odometry), or
+  // with the twist between consecutive poses (tf).
   bool deskew = true;
-  double max_time_gap_s = 0.5;  // poses farther apart give no twist (a gap, a restart)
+  double max_time_gap_s = 0.5;  // tf: poses farther apart give no twist (a gap, a restart)
   double tf_timeout_s = 0.5;    // wall time a scan waits for its tf before it is dropped
   double lidar_transform_timeout_s = 2.0;  // odometry source: wall time to wait for base -> lidar
   int queue_size = 8;                      // range images (and odometry) waiting

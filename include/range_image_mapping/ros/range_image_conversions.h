@@ -1,13 +1,17 @@
 // Conversions between ROS messages and the core types: the LidarRangeImage
-// message and the core RangeImage (with its LidarModel), and PointCloud2 into
-// the core PointCloudInput. Nothing here projects or filters points: that is
+// message and the core RangeImage (with its LidarModel), PointCloud2 into
+// the core PointCloudInput, and the core's twists and pose covariances in the
+// order of geometry_msgs. Nothing here projects or filters points: that is
 // the core's job (point_cloud_projection.h).
 #pragma once
 
 #include "range_image_mapping/LidarRangeImage.h"
 #include "range_image_mapping/point_cloud_projection.h"
 #include "range_image_mapping/range_image.h"
+#include "range_image_mapping/scan_motion.h"
 
+#include <boost/array.hpp>
+#include <geometry_msgs/Twist.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <std_msgs/Header.h>
 #include <topic_tools/shape_shifter.h>
@@ -58,6 +62,12 @@ RangeImage fromMessage(const LidarRangeImage& message, LidarModelCache& models);
 void toPointCloud2(const RangeImage& image, const std_msgs::Header& header,
                    sensor_msgs::PointCloud2& cloud);
 
+// The finite points (NaN marks an invalid one) as an unorganized cloud with
+// fields x, y, z and, when intensities is given (one per point), intensity,
+// all float32. Reuses cloud's buffers.
+void pointsToPointCloud2(const std::vector<Eigen::Vector3f>& points, const std::vector<float>* intensities,
+                         const std_msgs::Header& header, sensor_msgs::PointCloud2& cloud);
+
 // PointCloud2 into the core's plain arrays. Fields x, y, z (float32 or float64)
 // are required; optional: intensity (any numeric type), ring (uint8 or uint16),
 // per-point time as t or time (uint32 nanoseconds, or float32/float64 seconds,
@@ -66,6 +76,17 @@ void toPointCloud2(const RangeImage& image, const std_msgs::Header& header,
 // missing or unsupported field, and for sizes that disagree with the data.
 // Reuses input's buffers, so a converter called per scan does not allocate.
 void fromPointCloud2(const sensor_msgs::PointCloud2& cloud, PointCloudInput& input);
+
+// ------------------------------------------------------------ motion
+
+// A body twist in the core's order [angular, linear] as geometry_msgs/Twist
+// (linear first; tf2's Eigen conversions assume that order too), and back.
+geometry_msgs::Twist toTwistMessage(const Twist& twist);
+Twist fromTwistMessage(const geometry_msgs::Twist& message);
+
+// A 6x6 covariance in the core's order [rotation, translation] as the
+// row-major [x y z, roll pitch yaw] array of nav_msgs and geometry_msgs.
+void toCovarianceMessage(const Eigen::Matrix<double, 6, 6>& covariance, boost::array<double, 36>& message);
 
 // ------------------------------------------------------------ Ouster packets
 

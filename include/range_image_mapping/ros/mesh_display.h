@@ -1,0 +1,73 @@
+// The map's mesh for display: rviz markers (one TRIANGLE_LIST per chunk of
+// marker_chunk_blocks^3 voxel blocks, coloured by height or intensity and
+// shaded; only changed chunks re-sent) and the surface-points cloud. Both
+// leave out what is above display_max_height (ceilings); the map and saved
+// meshes keep everything.
+#pragma once
+
+#include "range_image_mapping/mapping/marching_cubes.h"
+#include "range_image_mapping/mapping/voxel_block_grid.h"
+#include "range_image_mapping/ros/parameters.h"
+
+#include <sensor_msgs/PointCloud2.h>
+#include <std_msgs/Header.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include <boost/shared_ptr.hpp>
+
+#include <unordered_set>
+#include <vector>
+
+namespace range_image_mapping {
+
+class MeshMarkers {
+ public:
+  using Message = boost::shared_ptr<const visualization_msgs::MarkerArray>;
+
+  // Uses world_frame and the colour and display parameters.
+  explicit MeshMarkers(const MapperParameters& parameters);
+
+  // The chunks a mesh update changed or removed wait for the next update().
+  void noteChanges(const mapping::MeshUpdate& changes);
+  // The next update() re-sends everything (a new subscriber, republish_mesh).
+  void requestFullResend() { full_resend_ = true; }
+  // Nobody holds the markers: the changes are dropped and the next
+  // subscriber gets everything.
+  void forgetSubscribers();
+  // The messages that bring a subscriber up to date with mesh: the changed
+  // chunks (a DELETE for a chunk that lost its triangles), or after
+  // requestFullResend a DELETEALL and every chunk with triangles. Messages
+  // are split past kTrianglesPerMessage, so rviz and the transport never see
+  // one huge message on a full re-send.
+  std::vector<Message> update(const mapping::MeshExtractor& mesh);
+  // After a map reset: a DELETEALL, and nothing held or changed.
+  Message clear();
+
+  static constexpr std::size_t kTrianglesPerMessage = 500'000;
+
+ private:
+  using ChunkKey = Eigen::Vector3i;  // a cube of marker_chunk_blocks^3 blocks
+  using ChunkSet = std::unordered_set<ChunkKey, mapping::BlockKeyHash>;
+
+  ChunkKey chunkOf(const mapping::BlockKey& block) const;
+  // The chunks' markers, split into messages.
+  std::vector<Message> markersOf(const ChunkSet& chunks, const mapping::MeshExtractor& mesh,
+                                 visualization_msgs::MarkerArray markers);
+  // The chunk's triangles as one marker (ADD), or a DELETE when it lost them
+  // and rviz holds it; nothing for a chunk that is empty and never was sent.
+  void appendChunkMarker(const ChunkKey& key, const mapping::MeshExtractor& mesh,
+                         visualization_msgs::MarkerArray& markers, std::size_t& triangles);
+  std_msgs::ColorRGBA color(const mapping::MeshChunk& chunk, int vertex) const;
+  visualization_msgs::Marker deleteAll() const;
+
+  MapperParameters parameters_;
+  ChunkSet changed_, published_;  // changed since their last publication; held by rviz
+  bool full_resend_ = true;
+};
+
+// Mesh vertices at or below max_height as an unorganized x y z (and
+// intensity) cloud.
+void meshVerticesToPointCloud2(const std::vector<const mapping::MeshChunk*>& chunks, bool with_intensity,
+                               double max_height, const std_msgs::Header& header, sensor_msgs::PointCloud2& cloud);
+
+}  // namespace range_image_mapping
