@@ -103,7 +103,7 @@ void writeTumPoses(const std::string& path, const std::vector<StampedPose>& pose
        << "_" << info.frame << " of frame " << info.frame << " in " << info.world << "\n"
        << headerLine("frame", info.frame) << headerLine("world", info.world)
        << headerLine("comment", info.comment);
-  file << std::fixed << std::setprecision(9);
+  file << std::fixed << std::setprecision(12);
   for (const StampedPose& stamped : poses) {
     const Eigen::Quaterniond rotation(stamped.pose.rotation());
     const Eigen::Vector3d& t = stamped.pose.translation();
@@ -181,7 +181,7 @@ std::vector<double> readTimes(const std::string& path) {
 
 void writeTimes(const std::string& path, const std::vector<double>& times_s) {
   std::ofstream file = openForWriting(path);
-  file << std::fixed << std::setprecision(9);
+  file << std::fixed << std::setprecision(12);
   for (const double time : times_s) file << time << '\n';
   finishWriting(file, path);
 }

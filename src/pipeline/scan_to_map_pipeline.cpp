@@ -75,8 +75,10 @@ ScanResult ScanToMapPipeline::process(const RangeImage& scan, bool source_starte
   if (!update.warning.empty()) result.warnings.push_back("odometry: " + update.warning);
   if (!update.skipped) {
     result.has_pose = true;
-    result.world_from_lidar = update.pose;
-    result.world_from_base = update.pose * options_.base_from_lidar.inverse();
+    // The odometry's world is the lidar at its first scan; the pipeline's is
+    // the base there (REP 105's odom): T_world_lidar = T_base_lidar T_lidar0_lidar.
+    result.world_from_lidar = options_.base_from_lidar * update.pose;
+    result.world_from_base = result.world_from_lidar * options_.base_from_lidar.inverse();
     result.twist << update.angular_velocity, update.linear_velocity;
     integrate(scan, result, &odometry_->measuredScan());
   }

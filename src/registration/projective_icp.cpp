@@ -222,7 +222,9 @@ NormalEquations accumulate(const std::vector<Eigen::Vector3f>& points, const std
   const float min_cosine = float(options.min_normal_cosine);
   const KernelWeight weight_of(options.kernel);
 
-  return tbb::parallel_reduce(
+  // Deterministic: the same blocks summed in the same order on every run and
+  // thread count, so rim run and the nodelets give the same poses to the bit.
+  return tbb::parallel_deterministic_reduce(
       tbb::blocked_range<std::size_t>(0, points.size(), 2048), NormalEquations{},
       [&](const tbb::blocked_range<std::size_t>& block, NormalEquations sum) {
         std::array<Eigen::Vector3f, kProjectionChunk> moved, source_normals;

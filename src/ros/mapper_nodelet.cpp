@@ -11,7 +11,8 @@
 // timer callback.
 #include "range_image_mapping/LidarRangeImage.h"
 #include "range_image_mapping/SaveMesh.h"
-#include "range_image_mapping/mapping/tsdf_map.h"
+#include "range_image_mapping/io/mesh_file.h"
+#include "range_image_mapping/pipeline/scan_to_map_pipeline.h"
 #include "range_image_mapping/ros/mesh_display.h"
 #include "range_image_mapping/ros/parameters.h"
 #include "range_image_mapping/ros/pose_source.h"
@@ -19,7 +20,6 @@
 #include "range_image_mapping/ros/statistics_window.h"
 #include "range_image_mapping/ros/steady_throttle.h"
 #include "range_image_mapping/ros/wall_clock_diagnostics.h"
-#include "range_image_mapping/scan_motion.h"
 
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <message_filters/subscriber.h>
@@ -77,7 +77,7 @@ double secondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
-// Refuses what TsdfMap::saveMesh could only fail on later, with a message
+// Refuses what io::saveMeshFile could only fail on later, with a message
 // naming the problem.
 std::string unwritablePathReason(const std::string& path) {
   namespace fs = std::filesystem;
@@ -125,7 +125,8 @@ class MapperNodelet : public nodelet::Nodelet {
   void onStatisticsTimer(const ros::SteadyTimerEvent&);
 
   MapperParameters parameters_;
-  std::unique_ptr<mapping::TsdfMap> map_;
+  std::unique_ptr<pipeline::ScanToMapPipeline> pipeline_;  // the map at given poses
+  mapping::TsdfMap& map() { return *pipeline_->map(); }
   std::unique_ptr<PoseSource> pose_source_;
   std::unique_ptr<MeshMarkers> mesh_markers_;
   LidarModelCache models_;
@@ -139,12 +140,7 @@ class MapperNodelet : public nodelet::Nodelet {
   ros::SteadyTimer mesh_timer_, statistics_timer_;
   std::unique_ptr<WallClockDiagnostics> diagnostics_;
 
-  // The previous pose, for the twist over the sweep when the pose source
-  // gives none (tf); its scan time on the sensor's clock (0 without column
-  // timestamps).
-  std::optional<Eigen::Isometry3d> last_pose_;
-  ros::Time last_pose_stamp_;
-  uint64_t last_sensor_time_ns_ = 0;
+  ros::Time last_scan_stamp_;  // of the last scan with a pose
 
   MapperStatistics statistics_;
   StatisticsWindow<MapperStatistics> log_window_, diagnostics_window_;
@@ -157,7 +153,14 @@ void MapperNodelet::onInit() {
   ros::NodeHandle& private_node = getPrivateNodeHandle();
   startOrRefuseLoad(getName(), "Mapper", [&] {
     parameters_ = readMapperParameters(private_node);
-    map_ = std::make_unique<mapping::TsdfMap>(parameters_.map);
+    pipeline::PipelineOptions options;
+    options.map = parameters_.map;
+    options.deskew_map = parameters_.deskew;
+    options.given_twist_max_gap_s = parameters_.max_time_gap_s;
+    // Meshing runs on the mesh timer, apart from the scan callback, so a slow
+    // mesh update never holds up integration.
+    options.mesh_period_s = 0.0;
+    pipeline_ = std::make_unique<pipeline::ScanToMapPipeline>(options);
   });
   pose_source_ = std::make_unique<PoseSource>(
       node, parameters_, getName(),
@@ -268,40 +271,18 @@ void MapperNodelet::integrate(const LidarRangeImage& message, const LidarPose& l
       NODELET_ERROR("range image stamped %.3f dropped: %s", message.header.stamp.toSec(), error.what());
     return;
   }
-  // Column times are on the sensor's clock and the header stamp may be the
-  // receive time: a zero stamp makes the core take the first valid column's
-  // time as the scan time, so the per-column motion is measured from it.
-  uint64_t sensor_time_ns = 0;
-  if (std::any_of(image.column_timestamp_ns.begin(), image.column_timestamp_ns.end(),
-                  [](uint64_t t) { return t != 0; })) {
-    image.stamp_ns = 0;
-    sensor_time_ns = scanTime(image, ScanTimeSource::kFirstValidColumn);
-  }
-
-  const Eigen::Isometry3d& world_from_lidar = lidar_pose.world_from_lidar;
-  mapping::ScanPose pose;
-  pose.world_from_lidar = world_from_lidar;
-  pose.scan_time_ns = scanTime(image, ScanTimeSource::kFirstValidColumn);
-  // The sweep's motion, assumed constant: the odometry's twist, the one it
-  // deskewed the scan with; from tf, the twist since the previous pose, over
-  // the time between the scans on the sensor's clock when both have one
-  // (receive stamps jitter with the load), else between header stamps.
-  if (parameters_.deskew && lidar_pose.twist) {
-    pose.twist = *lidar_pose.twist;
-  } else if (parameters_.deskew && last_pose_ && message.header.stamp > last_pose_stamp_) {
-    double dt_s = (message.header.stamp - last_pose_stamp_).toSec();
-    if (sensor_time_ns > last_sensor_time_ns_ && last_sensor_time_ns_ != 0)
-      dt_s = double(sensor_time_ns - last_sensor_time_ns_) * 1e-9;
-    if (dt_s <= parameters_.max_time_gap_s) pose.twist = twistBetween(*last_pose_, world_from_lidar, dt_s);
-  }
-  if (world_from_lidar.matrix().allFinite()) {
-    last_pose_ = world_from_lidar;
-    last_pose_stamp_ = message.header.stamp;
-    last_sensor_time_ns_ = sensor_time_ns;
-  }
-  const auto start = std::chrono::steady_clock::now();
-  const mapping::MapUpdate update = map_->integrate(image, pose);
-  statistics_.integration_seconds += secondsSince(start);
+  // The sweep's motion: the odometry's twist, the one it deskewed the scan
+  // with; from tf none, and the pipeline takes the twist since the previous
+  // pose over the scan times (the sensor's clock when columns carry times).
+  pipeline::GivenPose given;
+  given.world_from_lidar = lidar_pose.world_from_lidar;
+  given.twist = lidar_pose.twist;
+  const pipeline::ScanResult result = pipeline_->process(image, given);
+  if (result.has_pose) last_scan_stamp_ = message.header.stamp;
+  statistics_.integration_seconds += result.integrate_seconds;
+  mapping::MapUpdate update;
+  if (result.map) update = *result.map;
+  else update.warning = result.warnings.empty() ? "no pose" : result.warnings.front();
   if (update.integrated)
     ++statistics_.integrated;
   else
@@ -318,7 +299,7 @@ void MapperNodelet::integrate(const LidarRangeImage& message, const LidarPose& l
 
 void MapperNodelet::updateMesh() {
   const auto start = std::chrono::steady_clock::now();
-  const mapping::MeshUpdate update = map_->updateMesh();
+  const mapping::MeshUpdate update = pipeline_->updateMesh();
   statistics_.mesh_seconds += secondsSince(start);
   ++statistics_.mesh_updates;
   mesh_markers_->noteChanges(update);
@@ -327,7 +308,7 @@ void MapperNodelet::updateMesh() {
 void MapperNodelet::onMeshTimer(const ros::SteadyTimerEvent&) {
   try {
     updateMesh();
-    const std::size_t triangles = map_->mesh().triangleCount();
+    const std::size_t triangles = map().mesh().triangleCount();
     if (triangles > parameters_.triangle_warning && triangle_log_.allow(60.0))
       NODELET_WARN("the mesh has %zu triangles (more than triangle_warning %zu): rviz slows down; a larger "
                    "voxel_size or a memory_radius keeps it smaller",
@@ -335,7 +316,7 @@ void MapperNodelet::onMeshTimer(const ros::SteadyTimerEvent&) {
     if (mesh_publisher_.getNumSubscribers() == 0)
       mesh_markers_->forgetSubscribers();  // nobody holds the mesh: the next subscriber needs all of it
     else
-      for (const MeshMarkers::Message& message : mesh_markers_->update(map_->mesh())) mesh_publisher_.publish(message);
+      for (const MeshMarkers::Message& message : mesh_markers_->update(map().mesh())) mesh_publisher_.publish(message);
     if (surface_points_publisher_.getNumSubscribers() > 0) publishSurfacePoints();
   } catch (const std::exception& error) {
     if (error_log_.allow(parameters_.statistics_period_s)) NODELET_ERROR("mesh update failed: %s", error.what());
@@ -346,8 +327,8 @@ void MapperNodelet::publishSurfacePoints() {
   const auto cloud = boost::make_shared<sensor_msgs::PointCloud2>();
   std_msgs::Header header;
   header.frame_id = parameters_.world_frame;
-  header.stamp = last_pose_stamp_;
-  meshVerticesToPointCloud2(map_->mesh().chunks(), parameters_.map.grid.store_intensity,
+  header.stamp = last_scan_stamp_;
+  meshVerticesToPointCloud2(map().mesh().chunks(), parameters_.map.grid.store_intensity,
                             parameters_.display_max_height_m, header, *cloud);
   surface_points_publisher_.publish(boost::shared_ptr<const sensor_msgs::PointCloud2>(cloud));
 }
@@ -363,17 +344,17 @@ bool MapperNodelet::onSaveMesh(SaveMesh::Request& request, SaveMesh::Response& r
     return true;
   }
   try {
-    updateMesh();  // here rather than inside saveMesh, so the changed chunks still reach rviz
-    const std::size_t triangles = map_->mesh().triangleCount();
+    updateMesh();  // here rather than inside fullMesh, so the changed chunks still reach rviz
+    const std::size_t triangles = map().mesh().triangleCount();
     if (triangles == 0) {
       response.message = "mesh not saved: the map has no surface yet (" + std::to_string(statistics_.integrated) +
                          " scans integrated)";
       return true;
     }
-    map_->saveMesh(request.path);
+    io::saveMeshFile(request.path, map().fullMesh());
     response.success = true;
     response.message = "saved " + std::to_string(triangles) + " triangles from " +
-                       std::to_string(map_->statistics().scans_integrated) + " scans to " + request.path;
+                       std::to_string(map().statistics().scans_integrated) + " scans to " + request.path;
     NODELET_INFO("%s", response.message.c_str());
   } catch (const std::exception& error) {
     response.message = "mesh not saved to " + request.path + ": " + error.what();
@@ -383,9 +364,8 @@ bool MapperNodelet::onSaveMesh(SaveMesh::Request& request, SaveMesh::Response& r
 }
 
 bool MapperNodelet::onReset(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
-  map_->reset();
+  map().reset();
   pose_source_->clear();
-  last_pose_.reset();
   // Subscribers drop the old mesh now; the next mesh update sends only new chunks.
   const MeshMarkers::Message clear_all = mesh_markers_->clear();
   if (mesh_publisher_.getNumSubscribers() > 0) mesh_publisher_.publish(clear_all);
@@ -402,7 +382,7 @@ bool MapperNodelet::onRepublishMesh(std_srvs::Empty::Request&, std_srvs::Empty::
 
 void MapperNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   const auto [window, period] = diagnostics_window_.advance(statistics_);
-  const mapping::MapStatistics map = map_->statistics();
+  const mapping::MapStatistics map_statistics = map().statistics();
   status.add("rate (Hz)", period > 0.0 ? double(window.integrated) / period : 0.0);
   status.add("scans received", window.scans);
   status.add("scans integrated", window.integrated);
@@ -415,11 +395,11 @@ void MapperNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
                  : 0.0);
   status.add("mean mesh update (ms)",
              window.mesh_updates > 0 ? 1e3 * window.mesh_seconds / double(window.mesh_updates) : 0.0);
-  status.add("total scans integrated", map.scans_integrated);
-  status.add("total scans refused", map.scans_refused);
-  status.add("blocks", map.blocks);
-  status.add("memory (MB)", double(map.memory_bytes) / (1024.0 * 1024.0));
-  status.add("triangles", map.triangles);
+  status.add("total scans integrated", map_statistics.scans_integrated);
+  status.add("total scans refused", map_statistics.scans_refused);
+  status.add("blocks", map_statistics.blocks);
+  status.add("memory (MB)", double(map_statistics.memory_bytes) / (1024.0 * 1024.0));
+  status.add("triangles", map_statistics.triangles);
   status.add("last warning", last_warning_);
   if (window.scans == 0)
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "no range images");
@@ -434,13 +414,13 @@ void MapperNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
 void MapperNodelet::onStatisticsTimer(const ros::SteadyTimerEvent&) {
   const auto [window, period] = log_window_.advance(statistics_);
   if (window.scans == 0 || period <= 0.0) return;
-  const mapping::MapStatistics map = map_->statistics();
+  const mapping::MapStatistics map_statistics = map().statistics();
   const std::size_t given = window.integrated + window.refused;
   NODELET_INFO("mapper: %.1f Hz, %.1f ms per scan; integrated %zu, refused %zu, without pose %zu, rejected %zu; "
                "%zu blocks, %.1f MB, %zu triangles, %.1f ms per mesh update",
                double(window.integrated) / period, given > 0 ? 1e3 * window.integration_seconds / double(given) : 0.0,
-               window.integrated, window.refused, window.dropped_no_pose, window.rejected, map.blocks,
-               double(map.memory_bytes) / (1024.0 * 1024.0), map.triangles,
+               window.integrated, window.refused, window.dropped_no_pose, window.rejected, map_statistics.blocks,
+               double(map_statistics.memory_bytes) / (1024.0 * 1024.0), map_statistics.triangles,
                window.mesh_updates > 0 ? 1e3 * window.mesh_seconds / double(window.mesh_updates) : 0.0);
 }
 

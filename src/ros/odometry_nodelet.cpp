@@ -7,7 +7,7 @@
 // single-threaded queue (getNodeHandle), so the members need no locks. Nothing
 // thrown by bad input leaves a callback: it is counted and logged (throttled).
 #include "range_image_mapping/LidarRangeImage.h"
-#include "range_image_mapping/registration/lidar_odometry.h"
+#include "range_image_mapping/pipeline/scan_to_map_pipeline.h"
 #include "range_image_mapping/ros/lidar_mount.h"
 #include "range_image_mapping/ros/parameters.h"
 #include "range_image_mapping/ros/range_image_conversions.h"
@@ -50,6 +50,7 @@ struct OdometryStatistics {
   std::size_t iterations = 0;      // over registered scans
   std::size_t inliers = 0;         // over registered scans
   std::size_t degenerate = 0;
+  std::size_t untrusted = 0;       // registrations that broke a physical limit (among degenerate)
   std::size_t skipped = 0;
   std::size_t resets = 0;
   std::size_t dropped_frames = 0;  // gaps in the sensor's frame counter
@@ -64,6 +65,7 @@ struct OdometryStatistics {
     d.iterations = iterations - earlier.iterations;
     d.inliers = inliers - earlier.inliers;
     d.degenerate = degenerate - earlier.degenerate;
+    d.untrusted = untrusted - earlier.untrusted;
     d.skipped = skipped - earlier.skipped;
     d.resets = resets - earlier.resets;
     d.dropped_frames = dropped_frames - earlier.dropped_frames;
@@ -85,7 +87,7 @@ class OdometryNodelet : public nodelet::Nodelet {
   bool onReset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
   void noteFrameCounter(const LidarRangeImage& message);
   // step_s: time since the previous registered scan, 0 after a reset.
-  void publish(const registration::OdometryUpdate& update, const std_msgs::Header& header,
+  void publish(const pipeline::ScanResult& result, const std_msgs::Header& header,
                const Eigen::Isometry3d& base_from_lidar, double step_s);
   void publishDeskewedCloud(const std_msgs::Header& header);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
@@ -93,7 +95,7 @@ class OdometryNodelet : public nodelet::Nodelet {
   void clearTrajectory();
 
   OdometryParameters parameters_;
-  std::unique_ptr<registration::LidarOdometry> odometry_;
+  std::unique_ptr<pipeline::ScanToMapPipeline> pipeline_;  // odometry only
   LidarModelCache models_;
 
   ros::Subscriber range_image_subscriber_;
@@ -126,7 +128,9 @@ void OdometryNodelet::onInit() {
   ros::NodeHandle& node = getNodeHandle();
   startOrRefuseLoad(getName(), "Odometry", [&] {
     parameters_ = readOdometryParameters(getPrivateNodeHandle());
-    odometry_ = std::make_unique<registration::LidarOdometry>(parameters_.odometry);
+    pipeline::PipelineOptions options;
+    options.odometry = parameters_.odometry;
+    pipeline_ = std::make_unique<pipeline::ScanToMapPipeline>(options);
   });
   tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
   tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_);
@@ -166,38 +170,27 @@ void OdometryNodelet::onRangeImage(const LidarRangeImage::ConstPtr& message) {
         NODELET_ERROR("range image on %s dropped: %s", range_image_subscriber_.getTopic().c_str(), error.what());
       return;
     }
-    // The core deskews with column times minus the scan time: both must be on
-    // the sensor's clock, and the header stamp may be the receive time. A zero
-    // stamp makes the core use the first valid column's time.
-    if (std::any_of(image.column_timestamp_ns.begin(), image.column_timestamp_ns.end(),
-                    [](uint64_t t) { return t != 0; }))
-      image.stamp_ns = 0;
+    // The mount first: the pipeline poses the base, odom being the base at
+    // the first scan. Until tf has it, scans still go through the odometry.
+    const Eigen::Isometry3d* base_from_lidar = mount_->baseFromLidar(parameters_.base_frame, message->header.frame_id);
+    if (base_from_lidar) pipeline_->setBaseFromLidar(*base_from_lidar);
 
-    // ROS time going back (a bag loop, a restarted replay) restarts the data.
-    // The core restarts from the pose it has reached, right for a sensor clock
-    // that jumped but wrong for a replay that starts over: its scans would be
-    // posed, and mapped, from the end of the first pass. So the odometry
-    // starts over at the identity, as the first time.
+    // ROS time going back (a bag loop, a restarted replay): the source
+    // started over, and the pipeline restarts the odometry at the identity if
+    // the scan is older than the last (not for a scan that continues the data).
     const ros::Time now = ros::Time::now();
     if (!last_ros_time_.isZero() && now < last_ros_time_) ros_time_jumped_back_ = true;
     last_ros_time_ = now;
-    registration::OdometryUpdate update = odometry_->process(image);
-    if (ros_time_jumped_back_ && update.reset && last_update_.stamp_ns != 0 &&
-        update.stamp_ns < last_update_.stamp_ns) {
+    const pipeline::ScanResult result = pipeline_->process(image, ros_time_jumped_back_);
+    const registration::OdometryUpdate& update = *result.odometry;
+    if (result.restart == pipeline::Restart::kSourceStartedOver || message->header.stamp <= now)
       ros_time_jumped_back_ = false;
-      const std::string scan_time = update.warning.substr(0, update.warning.find(':'));  // "time went back by ..."
-      odometry_->reset();
-      update = odometry_->process(image);
-      update.warning = "ROS time jumped back (a bag loop or a restarted replay) and the scan " + scan_time +
-                       ": odometry restarted at the identity";
-    } else if (ros_time_jumped_back_ && message->header.stamp <= now) {
-      ros_time_jumped_back_ = false;  // a scan of the new time that continues the data: no restart
-    }
     ++statistics_.frames;
     statistics_.seconds += update.seconds;
     if (update.skipped) ++statistics_.skipped;
     if (update.reset) ++statistics_.resets;
     if (update.degenerate) ++statistics_.degenerate;
+    if (update.limit_exceeded) ++statistics_.untrusted;
     if (!update.skipped && !update.reset) {
       ++statistics_.registered;
       statistics_.iterations += update.iterations;
@@ -227,9 +220,8 @@ void OdometryNodelet::onRangeImage(const LidarRangeImage::ConstPtr& message) {
                      message->frame_id, message->header.stamp.toSec(), last_published_stamp_.toSec());
       return;
     }
-    const Eigen::Isometry3d* base_from_lidar = mount_->baseFromLidar(parameters_.base_frame, message->header.frame_id);
     if (!base_from_lidar) return;  // still waiting for tf
-    publish(update, message->header, *base_from_lidar, step_s);
+    publish(result, message->header, *base_from_lidar, step_s);
     if (deskewed_cloud_publisher_ && deskewed_cloud_publisher_.getNumSubscribers() > 0)
       publishDeskewedCloud(message->header);
     diagnostics_->updater().update();
@@ -260,10 +252,9 @@ void OdometryNodelet::noteFrameCounter(const LidarRangeImage& message) {
   last_frame_counter_ = counter;
 }
 
-void OdometryNodelet::publish(const registration::OdometryUpdate& update, const std_msgs::Header& header,
+void OdometryNodelet::publish(const pipeline::ScanResult& result, const std_msgs::Header& header,
                               const Eigen::Isometry3d& base_from_lidar, double step_s) {
-  // odom is base_frame at the first scan: T_odom_base = T_base_lidar T_odom_lidar T_lidar_base.
-  const Eigen::Isometry3d odom_from_base = base_from_lidar * update.pose * base_from_lidar.inverse();
+  const Eigen::Isometry3d& odom_from_base = result.world_from_base;  // odom: base_frame at the first scan
   if (!odom_from_base.matrix().allFinite()) {
     NODELET_ERROR("non-finite pose for frame stamped %.3f: not published", header.stamp.toSec());
     return;
@@ -278,11 +269,9 @@ void OdometryNodelet::publish(const registration::OdometryUpdate& update, const 
   // The lidar's motion as the base's, in base_frame (nav_msgs: the twist is
   // in child_frame_id): the pose perturbation's covariance and the body twist
   // both change frame with the mount's adjoint.
-  const Matrix6d covariance = covarianceInFrame(base_from_lidar, update.covariance);
+  const Matrix6d covariance = covarianceInFrame(base_from_lidar, result.odometry->covariance);
   toCovarianceMessage(covariance, odometry->pose.covariance);
-  Twist lidar_twist;
-  lidar_twist << update.angular_velocity, update.linear_velocity;
-  odometry->twist.twist = toTwistMessage(twistInFrame(base_from_lidar, lidar_twist));
+  odometry->twist.twist = toTwistMessage(twistInFrame(base_from_lidar, result.twist));
   // The registration's covariance is that of one step: divided by the step's
   // squared duration, the velocity's. Unknown (the core's identity) otherwise.
   toCovarianceMessage(step_s > 0.0 ? Matrix6d(covariance / (step_s * step_s)) : covariance,
@@ -315,7 +304,7 @@ void OdometryNodelet::publish(const registration::OdometryUpdate& update, const 
 
 void OdometryNodelet::publishDeskewedCloud(const std_msgs::Header& header) {
   const auto cloud = boost::make_shared<sensor_msgs::PointCloud2>();
-  pointsToPointCloud2(odometry_->deskewedScan().points, nullptr, header, *cloud);
+  pointsToPointCloud2(pipeline_->odometry()->deskewedScan().points, nullptr, header, *cloud);
   deskewed_cloud_publisher_.publish(boost::shared_ptr<const sensor_msgs::PointCloud2>(cloud));
 }
 
@@ -325,7 +314,7 @@ void OdometryNodelet::clearTrajectory() {
 }
 
 bool OdometryNodelet::onReset(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
-  odometry_->reset();
+  pipeline_->reset();
   clearTrajectory();
   last_frame_counter_.reset();
   last_update_ = registration::OdometryUpdate();
@@ -343,6 +332,7 @@ void OdometryNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
   status.add("mean inliers", double(window.inliers) / registered);
   status.add("mean step (ms)", window.frames > 0 ? 1e3 * window.seconds / double(window.frames) : 0.0);
   status.add("degenerate", window.degenerate);
+  status.add("untrusted (physical limits)", window.untrusted);
   status.add("skipped", window.skipped);
   status.add("resets", window.resets);
   status.add("dropped frames", window.dropped_frames);
@@ -354,7 +344,10 @@ void OdometryNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "no range images");
   else if (window.degenerate + window.dropped_frames + window.out_of_order + window.rejected + window.skipped > 0)
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN,
-                   window.degenerate > 0 ? "degenerate registrations" : "dropped, skipped or out-of-order frames");
+                   window.untrusted > 0   ? "registrations broke a physical limit (max_speed, max_angular_rate_deg, "
+                                            "max_acceleration): a moving object or a wrong match; motion prior used"
+                   : window.degenerate > 0 ? "degenerate registrations"
+                                           : "dropped, skipped or out-of-order frames");
   else
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, "tracking");
 }
@@ -363,11 +356,12 @@ void OdometryNodelet::onStatisticsTimer(const ros::SteadyTimerEvent&) {
   const auto [window, period] = log_window_.advance(statistics_);
   if (window.frames == 0 || period <= 0.0) return;
   const double registered = std::max<double>(1.0, double(window.registered));
-  NODELET_INFO("odometry: %.1f Hz, %.1f ms per step, %.1f iterations, %.0f inliers; degenerate %zu, skipped %zu, "
-               "resets %zu, dropped %zu, out of order %zu, rejected %zu",
+  NODELET_INFO("odometry: %.1f Hz, %.1f ms per step, %.1f iterations, %.0f inliers; degenerate %zu (untrusted %zu), "
+               "skipped %zu, resets %zu, dropped %zu, out of order %zu, rejected %zu",
                double(window.frames) / period, 1e3 * window.seconds / double(window.frames),
                double(window.iterations) / registered, double(window.inliers) / registered, window.degenerate,
-               window.skipped, window.resets, window.dropped_frames, window.out_of_order, window.rejected);
+               window.untrusted, window.skipped, window.resets, window.dropped_frames, window.out_of_order,
+               window.rejected);
 }
 
 }  // namespace range_image_mapping

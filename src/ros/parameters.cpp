@@ -278,6 +278,14 @@ OdometryParameters readOdometryParameters(const ros::NodeHandle& private_node) {
       M_PI / 180.0;
   odometry.max_time_gap_s = reader.getDouble("max_time_gap", odometry_defaults.max_time_gap_s, 1e-3, 3600.0);
   odometry.deskew_passes = reader.getInt("deskew_passes", odometry_defaults.deskew_passes, 0, 100);
+  odometry.max_speed_mps = reader.getDouble("max_speed", odometry_defaults.max_speed_mps, 0.0, 1e3);
+  odometry.max_angular_rate_radps =
+      reader.getDouble("max_angular_rate_deg", odometry_defaults.max_angular_rate_radps * 180.0 / M_PI, 0.0, 1e5) *
+      M_PI / 180.0;
+  odometry.max_acceleration_mps2 =
+      reader.getDouble("max_acceleration", odometry_defaults.max_acceleration_mps2, 0.0, 1e4);
+  odometry.velocity_decay_time_s =
+      reader.getDouble("velocity_decay_time", odometry_defaults.velocity_decay_time_s, 0.0, 3600.0);
   return parameters;
 }
 

@@ -10,8 +10,7 @@
 #include "range_image_mapping/io/kitti.h"
 #include "range_image_mapping/io/pose_file.h"
 #include "range_image_mapping/io/recording.h"
-#include "range_image_mapping/mapping/tsdf_map.h"
-#include "range_image_mapping/scan_motion.h"
+#include "range_image_mapping/pipeline/scan_to_map_pipeline.h"
 
 #include <json/json.h>
 
@@ -120,7 +119,12 @@ Json::Value timingJson(const StageTimes& times, std::size_t scans) {
 
 int runMap(const MapCommandOptions& options) {
   const auto started = Clock::now();
-  mapping::TsdfMap map(options.map);  // MappingError for bad options, before any reading
+  pipeline::PipelineOptions pipeline_options;  // poses from the file, no odometry
+  pipeline_options.map = options.map;
+  pipeline_options.deskew_map = !options.no_deskew;
+  pipeline_options.mesh_period_s = 0.0;  // one mesh at the end
+  pipeline::ScanToMapPipeline pipeline(pipeline_options);  // MappingError for bad options, before any reading
+  mapping::TsdfMap& map = *pipeline.map();
   if (fs::path(options.output).extension() != ".ply")
     throw std::invalid_argument("--out " + options.output + ": the mesh is written as PLY, name it *.ply");
   const io::Recording recording = io::openRecording(options.recording);
@@ -145,22 +149,23 @@ int runMap(const MapCommandOptions& options) {
   bool has_pending = false;
   Twist twist = Twist::Zero();
   const auto integratePending = [&] {
-    mapping::ScanPose pose;
+    pipeline::GivenPose pose;
     pose.world_from_lidar = poses[pending_index];
-    pose.twist = options.no_deskew ? Twist::Zero() : twist;
-    pose.scan_time_ns = scanTime(pending, ScanTimeSource::kFirstValidColumn);
-    const auto integrate_started = Clock::now();
-    const mapping::MapUpdate update = map.integrate(pending, pose);
-    const double seconds = secondsSince(integrate_started);
+    pose.twist = twist;
+    const pipeline::ScanResult result = pipeline.process(pending, pose);
+    const double seconds = result.integrate_seconds;
     times.integrate += seconds;
     times.integrate_per_scan.push_back(seconds);
-    integrated += update.integrated;
-    refused += !update.integrated;
-    blocks_refused += update.integration.blocks_refused;
-    blocks_dropped += update.blocks_dropped;
-    points_used += update.integration.points_used;
-    if (!update.warning.empty() && warnings++ < 10)
-      std::cerr << "\nwarning: scan " << pending_index << ": " << update.warning << "\n";
+    const bool mapped = result.map && result.map->integrated;
+    integrated += mapped;
+    refused += !mapped;
+    if (result.map) {
+      blocks_refused += result.map->integration.blocks_refused;
+      blocks_dropped += result.map->blocks_dropped;
+      points_used += result.map->integration.points_used;
+    }
+    for (const std::string& warning : result.warnings)
+      if (warnings++ < 10) std::cerr << "\nwarning: scan " << pending_index << ": " << warning << "\n";
     showProgress(int(pending_index + 1), recording.expected_frames, started);
   };
 
@@ -170,8 +175,7 @@ int runMap(const MapCommandOptions& options) {
     const std::size_t index = scans++;
     if (index < poses.size()) {
       if (has_pending) {
-        const double dt_s = (double(scanTime(scan, ScanTimeSource::kFirstValidColumn)) -
-                             double(scanTime(pending, ScanTimeSource::kFirstValidColumn))) * 1e-9;
+        const double dt_s = (double(pipeline.scanTime(scan)) - double(pipeline.scanTime(pending))) * 1e-9;
         twist = twistBetween(poses[pending_index], poses[index], dt_s);
         integratePending();
       }

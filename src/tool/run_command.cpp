@@ -1,6 +1,5 @@
-// rim run: the whole pipeline offline, with no ROS master. Each scan goes
-// through the odometry, then into the TSDF map at the pose and velocity the
-// odometry gave, exactly as the Odometry and Mapper nodelets chain them.
+// rim run: the whole pipeline offline, with no ROS master: the core's
+// ScanToMapPipeline, the story the Odometry and Mapper nodelets tell too.
 // INPUT is a recording or one of rim simulate's presets (simulated first).
 #include "commands.h"
 #include "outputs.h"
@@ -10,8 +9,7 @@
 #include "range_image_mapping/evaluation/trajectory_metrics.h"
 #include "range_image_mapping/io/pose_file.h"
 #include "range_image_mapping/io/recording.h"
-#include "range_image_mapping/mapping/tsdf_map.h"
-#include "range_image_mapping/registration/lidar_odometry.h"
+#include "range_image_mapping/pipeline/scan_to_map_pipeline.h"
 
 #include <Eigen/SVD>
 #include <json/json.h>
@@ -37,7 +35,7 @@ struct RunCommandOptions {
   std::string output_directory;
   std::string environment;  // indoor or outdoor: voxel, range clip and kernel defaults
   bool sensor_frame = false;
-  int mesh_every = 10;  // re-mesh after this many scans (1 s at 10 Hz), as the Mapper's mesh_rate
+  double mesh_period_s = 1.0;  // re-mesh after this much scan time, as the Mapper's mesh_period
   bool no_plot = false;
   bool simulate_bag = false;  // a preset also writes packets.bag, to replay through the launch
   OdometryCommandLine odometry;
@@ -144,19 +142,17 @@ Json::Value statisticsJson(std::vector<double> values) {
   return json;
 }
 
-int runPipeline(RunCommandOptions options, const Command& command) {
-  const auto started = Clock::now();
-  const fs::path out(options.output_directory);
-  fs::create_directories(out);
-  const std::vector<std::string> presets = simulationPresetNames();
-  const bool preset = std::find(presets.begin(), presets.end(), options.recording.input) != presets.end() &&
-                      !fs::exists(options.recording.input);
-  std::string environment = options.environment;
-  if (preset && environment.empty()) environment = isIndoorPreset(options.recording.input) ? "indoor" : "outdoor";
-  if (environment.empty()) environment = "outdoor";
-  applyEnvironment(environment, command, options);
-  mapping::TsdfMap map(options.map);  // bad mapping options fail before any work
-  registration::LidarOdometry odometry(options.odometry.options());
+// What the scans gave: poses, per-frame costs and counts.
+struct RunRecord {
+  std::vector<io::StampedPose> poses;
+  std::vector<FrameRecord> records;
+  std::vector<double> mesh_update_ms;
+  double read_seconds = 0, odometry_seconds = 0, integrate_seconds = 0, mesh_seconds = 0;
+  int frames = 0, degenerate = 0, resets = 0, skipped = 0, refused = 0;
+};
+
+// A preset is simulated into out/sequence first; anything else is read as it is.
+io::RecordingOptions simulateIfPreset(RunCommandOptions& options, bool preset, const fs::path& out) {
   if (preset) {
     const fs::path sequence = out / "sequence";
     std::cerr << "simulating " << options.recording.input << " into " << sequence.string() << "\n";
@@ -164,157 +160,121 @@ int runPipeline(RunCommandOptions options, const Command& command) {
                    options.map.integrator.max_range_m, options.simulate_bag ? "bag" : "");
     options.recording.input = sequence.string();
   }
-  const io::Recording recording = io::openRecording(options.recording);
+  return options.recording;
+}
 
+pipeline::PipelineOptions pipelineOptions(const RunCommandOptions& options) {
+  pipeline::PipelineOptions pipeline;
+  pipeline.odometry = options.odometry.options();
+  pipeline.map = options.map;
+  pipeline.deskew_map = pipeline.odometry->deskew;
+  pipeline.mesh_period_s = options.mesh_period_s;
+  return pipeline;
+}
+
+// Every scan through the pipeline, until the recording ends or Ctrl-C.
+RunRecord runScans(pipeline::ScanToMapPipeline& pipeline, const io::Recording& recording, const fs::path& out) {
+  RunRecord run;
   OdometryFramesCsv frames_file((out / "odometry_frames.csv").string());
-  std::vector<io::StampedPose> poses;
-  std::vector<FrameRecord> records;
-  std::vector<double> mesh_update_ms;
-  double read_seconds = 0, odometry_seconds = 0, integrate_seconds = 0, mesh_seconds = 0;
-  int frames = 0, degenerate = 0, resets = 0, skipped = 0, refused = 0;
   std::size_t warnings = 0;
-
   interrupted = false;
   const auto previous_handler = std::signal(SIGINT, [](int) { interrupted = true; });
-  std::cerr << "odometry and mapping over " << recording.description << " (" << environment << ": voxel "
-            << options.map.grid.voxel_size_m << " m, range clip " << options.map.integrator.max_range_m
-            << " m); Ctrl-C stops and saves\n";
   const auto loop_started = Clock::now();
   auto read_started = Clock::now();
   io::forEachScan(recording, [&](const RangeImage& scan) {
-    read_seconds += secondsSince(read_started);
-    FrameRecord record;
-    const registration::OdometryUpdate update = odometry.process(scan);
-    frames_file.add(frames, update);
-    record.odometry_ms = update.seconds * 1e3;
-    record.inliers = update.inliers;
-    record.time_s = double(update.stamp_ns) * 1e-9;
-    odometry_seconds += update.seconds;
-    degenerate += update.degenerate;
-    resets += update.reset && frames > 0;
-    skipped += update.skipped;
-    if (!update.warning.empty() && warnings++ < 20)
-      std::cerr << "\nwarning: frame " << frames << ": " << update.warning << "\n";
-    if (!update.skipped) {
-      poses.push_back({record.time_s, update.pose});
-      mapping::ScanPose pose;
-      pose.world_from_lidar = update.pose;
-      if (options.odometry.options().deskew) pose.twist << update.angular_velocity, update.linear_velocity;
-      pose.scan_time_ns = update.stamp_ns;
-      const auto integrate_started = Clock::now();
-      const mapping::MapUpdate map_update = map.integrate(scan, pose);
-      record.integrate_ms = 1e3 * secondsSince(integrate_started);
-      integrate_seconds += record.integrate_ms * 1e-3;
-      refused += !map_update.integrated;
-      if (!map_update.warning.empty() && warnings++ < 20)
-        std::cerr << "\nwarning: frame " << frames << ": " << map_update.warning << "\n";
-      records.push_back(record);
+    run.read_seconds += secondsSince(read_started);
+    const pipeline::ScanResult result = pipeline.process(scan);
+    const registration::OdometryUpdate& update = *result.odometry;
+    frames_file.add(run.frames, update);
+    run.odometry_seconds += result.odometry_seconds;
+    run.integrate_seconds += result.integrate_seconds;
+    run.degenerate += update.degenerate;
+    run.resets += update.reset && run.frames > 0;
+    run.skipped += update.skipped;
+    run.refused += result.map && !result.map->integrated;
+    for (const std::string& warning : result.warnings)
+      if (warnings++ < 20) std::cerr << "\nwarning: frame " << run.frames << ": " << warning << "\n";
+    if (result.has_pose) {
+      const double time_s = double(result.scan_time_ns) * 1e-9;
+      run.poses.push_back({time_s, result.world_from_lidar});
+      run.records.push_back({time_s, 1e3 * result.odometry_seconds, 1e3 * result.integrate_seconds, update.inliers});
     }
-    ++frames;
-    if (frames % options.mesh_every == 0) {
-      const mapping::MeshUpdate mesh_update = map.updateMesh();
-      mesh_update_ms.push_back(1e3 * mesh_update.seconds);
-      mesh_seconds += mesh_update.seconds;
+    if (result.mesh) {
+      run.mesh_update_ms.push_back(1e3 * result.mesh_seconds);
+      run.mesh_seconds += result.mesh_seconds;
     }
-    showProgress(frames, recording.expected_frames, loop_started);
+    ++run.frames;
+    showProgress(run.frames, recording.expected_frames, loop_started);
     read_started = Clock::now();
     return !interrupted;
   });
   std::signal(SIGINT, previous_handler);
-  if (recording.expected_frames <= 0 || frames != recording.expected_frames) finishProgress();
+  if (recording.expected_frames <= 0 || run.frames != recording.expected_frames) finishProgress();
   frames_file.close();
-  if (interrupted) std::cerr << "interrupted after " << frames << " scans: saving what there is\n";
-  if (poses.empty()) throw std::runtime_error("no usable scans in " + recording.input);
+  if (interrupted) std::cerr << "interrupted after " << run.frames << " scans: saving what there is\n";
+  if (run.poses.empty()) throw std::runtime_error("no usable scans in " + recording.input);
+  return run;
+}
 
-  const auto mesh_started = Clock::now();
-  const mapping::TriangleMeshData mesh = map.fullMesh();
-  mesh_seconds += secondsSince(mesh_started);
-  const std::string mesh_path = (out / "mesh.ply").string();
-  writeMeshAtomically(mesh_path, mesh);
-  const std::string trajectory_path = (out / "trajectory.txt").string();
-  const std::string tum_path = writeTrajectory(trajectory_path, poses, recording, options.sensor_frame,
-                                               "rim run " + recording.input);
-  const mapping::MapStatistics statistics = map.statistics();
-
-  Json::Value report;
-  report["input"] = recording.input;
-  report["description"] = recording.description;
-  report["environment"] = environment;
-  report["interrupted"] = bool(interrupted);
-  report["frames"] = frames;
-  report["poses"] = Json::UInt64(poses.size());
-  report["odometry"] = options.odometry.json();
-  report["odometry"]["degenerate"] = degenerate;
-  report["odometry"]["resets"] = resets;
-  report["odometry"]["skipped"] = skipped;
-  report["mapping"] = mapOptionsJson(options.map, options.odometry.options().deskew);
-  report["mapping"]["scans_refused"] = refused;
-  report["mapping"]["blocks"] = Json::UInt64(statistics.blocks);
-  report["mapping"]["memory_bytes"] = Json::UInt64(statistics.memory_bytes);
-  report["mapping"]["vertices"] = Json::UInt64(mesh.vertices.size());
-  report["mapping"]["triangles"] = Json::UInt64(mesh.triangles.size());
-  std::vector<double> odometry_ms, integrate_ms, inliers;
-  for (const FrameRecord& record : records) {
+Json::Value timingJson(const RunRecord& run, std::vector<double>& odometry_ms, std::vector<double>& integrate_ms) {
+  for (const FrameRecord& record : run.records) {
     odometry_ms.push_back(record.odometry_ms);
     integrate_ms.push_back(record.integrate_ms);
-    inliers.push_back(double(record.inliers));
   }
-  Json::Value& timing = report["timing"];
-  timing["read_seconds"] = read_seconds;
-  timing["odometry_seconds"] = odometry_seconds;
-  timing["integrate_seconds"] = integrate_seconds;
-  timing["mesh_seconds"] = mesh_seconds;
+  Json::Value timing;
+  timing["read_seconds"] = run.read_seconds;
+  timing["odometry_seconds"] = run.odometry_seconds;
+  timing["integrate_seconds"] = run.integrate_seconds;
+  timing["mesh_seconds"] = run.mesh_seconds;
   timing["odometry_ms"] = statisticsJson(odometry_ms);
   timing["integrate_ms"] = statisticsJson(integrate_ms);
-  timing["mesh_update_ms"] = statisticsJson(mesh_update_ms);
-  timing["odometry_frames_per_second"] = odometry_seconds > 0 ? double(frames) / odometry_seconds : 0.0;
-  timing["mapping_frames_per_second"] = integrate_seconds > 0 ? double(records.size()) / integrate_seconds : 0.0;
-  report["inliers"] = statisticsJson(inliers);
-  report["peak_resident_megabytes"] = peakResidentMegabytes();
-  report["outputs"]["mesh"] = mesh_path;
-  report["outputs"]["trajectory_kitti"] = trajectory_path;
-  report["outputs"]["trajectory_tum"] = tum_path;
-  report["outputs"]["odometry_frames"] = (out / "odometry_frames.csv").string();
+  timing["mesh_update_ms"] = statisticsJson(run.mesh_update_ms);
+  timing["odometry_frames_per_second"] = run.odometry_seconds > 0 ? double(run.frames) / run.odometry_seconds : 0.0;
+  timing["mapping_frames_per_second"] =
+      run.integrate_seconds > 0 ? double(run.records.size()) / run.integrate_seconds : 0.0;
+  return timing;
+}
 
-  std::optional<GroundTruthComparison> comparison;
-  if (!recording.ground_truth.poses.empty()) {
-    comparison = compareWithGroundTruth(recording, poses, mesh, options.map.grid.voxel_size_m,
-                                        options.map.integrator.max_range_m,
-                                        (out / "mesh_in_ground_truth_frame.ply").string());
-    const evaluation::TrajectoryEvaluation& trajectory = comparison->trajectory;
-    report["ground_truth"]["ate_rmse_m"] = trajectory.absolute_translation_m.rmse;
-    report["ground_truth"]["ate_max_m"] = trajectory.absolute_translation_m.maximum;
-    if (trajectory.kitti.segments > 0) {
-      report["ground_truth"]["rpe_translation_percent"] = trajectory.kitti.translation_percent;
-      report["ground_truth"]["rpe_rotation_deg_per_100m"] = 100.0 * trajectory.kitti.rotation_deg_per_m;
-    }
-    report["ground_truth"]["trajectory_summary"] = evaluation::trajectorySummaryLine(trajectory);
-    if (comparison->has_surface) report["ground_truth"]["surface"] = comparison->surface.json;
+Json::Value groundTruthJson(const GroundTruthComparison& comparison) {
+  Json::Value json;
+  const evaluation::TrajectoryEvaluation& trajectory = comparison.trajectory;
+  json["ate_rmse_m"] = trajectory.absolute_translation_m.rmse;
+  json["ate_max_m"] = trajectory.absolute_translation_m.maximum;
+  if (trajectory.kitti.segments > 0) {
+    json["rpe_translation_percent"] = trajectory.kitti.translation_percent;
+    json["rpe_rotation_deg_per_100m"] = 100.0 * trajectory.kitti.rotation_deg_per_m;
   }
-  report["wall_seconds"] = secondsSince(started);
+  json["trajectory_summary"] = evaluation::trajectorySummaryLine(trajectory);
+  if (comparison.has_surface) json["surface"] = comparison.surface.json;
+  return json;
+}
 
-  std::string plot_note;
-  if (!options.no_plot) {
-    evaluation::RunPlotData plot;
-    for (const io::StampedPose& pose : poses) plot.estimate.push_back(pose.pose);
-    if (comparison) {
-      plot.estimate = comparison->trajectory.aligned_estimate;
-      plot.ground_truth = comparison->trajectory.ground_truth;
-      plot.position_errors_m = comparison->trajectory.position_errors_m;
-    }
-    plot.odometry_ms = odometry_ms;
-    plot.integrate_ms = integrate_ms;
-    try {
-      evaluation::plotRunReport(plot, (out / "report.png").string());
-      report["outputs"]["report_png"] = (out / "report.png").string();
-    } catch (const evaluation::PlotError& error) {
-      plot_note = std::string("no report.png: ") + error.what();
-    }
+// report.png; "" or why there is none.
+std::string plotRun(const RunRecord& run, const std::optional<GroundTruthComparison>& comparison,
+                    const std::vector<double>& odometry_ms, const std::vector<double>& integrate_ms,
+                    const std::string& path) {
+  evaluation::RunPlotData plot;
+  for (const io::StampedPose& pose : run.poses) plot.estimate.push_back(pose.pose);
+  if (comparison) {
+    plot.estimate = comparison->trajectory.aligned_estimate;
+    plot.ground_truth = comparison->trajectory.ground_truth;
+    plot.position_errors_m = comparison->trajectory.position_errors_m;
   }
-  writeJsonFile((out / "report.json").string(), report);
+  plot.odometry_ms = odometry_ms;
+  plot.integrate_ms = integrate_ms;
+  try {
+    evaluation::plotRunReport(plot, path);
+    return "";
+  } catch (const evaluation::PlotError& error) {
+    return std::string("no report.png: ") + error.what();
+  }
+}
 
-  std::cout << frames << " scans (" << poses.size() << " poses, " << degenerate << " degenerate, " << resets
-            << " resets, " << skipped << " skipped, " << refused << " refused by the map)\n"
+void printSummary(const RunRecord& run, const Json::Value& report,
+                  const std::optional<GroundTruthComparison>& comparison) {
+  const Json::Value& timing = report["timing"];
+  std::cout << run.frames << " scans (" << run.poses.size() << " poses, " << run.degenerate << " degenerate, "
+            << run.resets << " resets, " << run.skipped << " skipped, " << run.refused << " refused by the map)\n"
             << "odometry " << timing["odometry_frames_per_second"].asDouble() << " frames/s ("
             << timing["odometry_ms"]["median"].asDouble() << " ms median), mapping "
             << timing["mapping_frames_per_second"].asDouble() << " frames/s ("
@@ -327,11 +287,95 @@ int runPipeline(RunCommandOptions options, const Command& command) {
     std::cout << "\n";
     if (comparison->has_surface) std::cout << "mesh: " << comparison->surface.summary_line << "\n";
   }
-  std::cout << "mesh " << mesh_path << " (" << mesh.triangles.size() << " triangles, "
-            << double(statistics.memory_bytes) / (1 << 20) << " MiB of voxels); report "
-            << (out / "report.json").string();
-  if (report["outputs"].isMember("report_png")) std::cout << " and " << (out / "report.png").string();
-  std::cout << "; trajectory " << trajectory_path << "\n";
+  const Json::Value& outputs = report["outputs"];
+  std::cout << "mesh " << outputs["mesh"].asString() << " (" << report["mapping"]["triangles"].asUInt64()
+            << " triangles, " << report["mapping"]["memory_bytes"].asDouble() / (1 << 20)
+            << " MiB of voxels); report " << outputs["report_json"].asString();
+  if (outputs.isMember("report_png")) std::cout << " and " << outputs["report_png"].asString();
+  std::cout << "; trajectory " << outputs["trajectory_kitti"].asString() << "\n";
+}
+
+int runPipeline(RunCommandOptions options, const Command& command) {
+  const auto started = Clock::now();
+  const fs::path out(options.output_directory);
+  fs::create_directories(out);
+  const std::vector<std::string> presets = simulationPresetNames();
+  const bool preset = std::find(presets.begin(), presets.end(), options.recording.input) != presets.end() &&
+                      !fs::exists(options.recording.input);
+  std::string environment = options.environment;
+  if (preset && environment.empty()) environment = isIndoorPreset(options.recording.input) ? "indoor" : "outdoor";
+  if (environment.empty()) environment = "outdoor";
+  applyEnvironment(environment, command, options);
+  pipeline::ScanToMapPipeline pipeline(pipelineOptions(options));  // bad options fail before any work
+  const io::Recording recording = io::openRecording(simulateIfPreset(options, preset, out));
+  // The map's world is the base at the first scan, as the nodelets': for an
+  // Ouster recording the sensor frame (os_sensor), whose lidar frame the
+  // images are in. Poses are written of the lidar frame as before.
+  const Eigen::Isometry3d base_from_lidar =
+      recording.ouster ? recording.ouster->intrinsics.lidar_to_sensor : Eigen::Isometry3d::Identity();
+  pipeline.setBaseFromLidar(base_from_lidar);
+  std::cerr << "odometry and mapping over " << recording.description << " (" << environment << ": voxel "
+            << options.map.grid.voxel_size_m << " m, range clip " << options.map.integrator.max_range_m
+            << " m); Ctrl-C stops and saves\n";
+
+  RunRecord run = runScans(pipeline, recording, out);
+  std::vector<io::StampedPose> lidar_poses = run.poses;  // in the odometry's world: the lidar at the first scan
+  for (io::StampedPose& pose : lidar_poses) pose.pose = base_from_lidar.inverse() * pose.pose;
+
+  mapping::TsdfMap& map = *pipeline.map();
+  const auto mesh_started = Clock::now();
+  const mapping::TriangleMeshData mesh = map.fullMesh();
+  run.mesh_seconds += secondsSince(mesh_started);
+  const mapping::MapStatistics statistics = map.statistics();
+  Json::Value report;
+  Json::Value& outputs = report["outputs"];
+  outputs["mesh"] = (out / "mesh.ply").string();
+  outputs["trajectory_kitti"] = (out / "trajectory.txt").string();
+  outputs["odometry_frames"] = (out / "odometry_frames.csv").string();
+  outputs["report_json"] = (out / "report.json").string();
+  writeMeshAtomically(outputs["mesh"].asString(), mesh);
+  outputs["trajectory_tum"] = writeTrajectory(outputs["trajectory_kitti"].asString(), lidar_poses, recording,
+                                              options.sensor_frame, "rim run " + recording.input);
+
+  report["input"] = recording.input;
+  report["description"] = recording.description;
+  report["environment"] = environment;
+  report["interrupted"] = bool(interrupted);
+  report["frames"] = run.frames;
+  report["poses"] = Json::UInt64(run.poses.size());
+  report["odometry"] = options.odometry.json();
+  report["odometry"]["degenerate"] = run.degenerate;
+  report["odometry"]["resets"] = run.resets;
+  report["odometry"]["skipped"] = run.skipped;
+  report["mapping"] = mapOptionsJson(options.map, options.odometry.options().deskew);
+  report["mapping"]["scans_refused"] = run.refused;
+  report["mapping"]["blocks"] = Json::UInt64(statistics.blocks);
+  report["mapping"]["memory_bytes"] = Json::UInt64(statistics.memory_bytes);
+  report["mapping"]["vertices"] = Json::UInt64(mesh.vertices.size());
+  report["mapping"]["triangles"] = Json::UInt64(mesh.triangles.size());
+  std::vector<double> odometry_ms, integrate_ms, inliers;
+  for (const FrameRecord& record : run.records) inliers.push_back(double(record.inliers));
+  report["timing"] = timingJson(run, odometry_ms, integrate_ms);
+  report["inliers"] = statisticsJson(inliers);
+  report["peak_resident_megabytes"] = peakResidentMegabytes();
+
+  std::optional<GroundTruthComparison> comparison;
+  if (!recording.ground_truth.poses.empty()) {
+    comparison = compareWithGroundTruth(recording, run.poses, mesh, options.map.grid.voxel_size_m,
+                                        options.map.integrator.max_range_m,
+                                        (out / "mesh_in_ground_truth_frame.ply").string());
+    report["ground_truth"] = groundTruthJson(*comparison);
+  }
+  report["wall_seconds"] = secondsSince(started);
+  std::string plot_note;
+  if (!options.no_plot) {
+    plot_note = plotRun(run, comparison, odometry_ms, integrate_ms, (out / "report.png").string());
+    if (plot_note.empty()) outputs["report_png"] = (out / "report.png").string();
+  }
+  Json::Value written = report;
+  written["outputs"].removeMember("report_json");
+  writeJsonFile(outputs["report_json"].asString(), written);
+  printSummary(run, report, comparison);
   if (!plot_note.empty()) std::cerr << plot_note << "\n";
   return 0;
 }
@@ -356,7 +400,8 @@ void addRunCommand(Command& rim) {
                  "the preset's, else outdoor")
       .check(oneOf({"indoor", "outdoor"}));
   command.flag("--sensor-frame", options->sensor_frame, "write poses of the Ouster sensor frame");
-  command.option("--mesh-every", options->mesh_every, "update the mesh after every N scans")
+  command.option("--mesh-period", options->mesh_period_s,
+                 "update the mesh after this many seconds of scan time (the Mapper's mesh_period)")
       .showDefault()
       .check(positive());
   command.flag("--no-plot", options->no_plot, "do not draw report.png");

@@ -35,6 +35,10 @@ TEST(OdometryParameters, DefaultsWhenNothingIsSet) {
   EXPECT_EQ(parameters.odometry.max_time_gap_s, core.max_time_gap_s);
   EXPECT_EQ(parameters.odometry.keyframe_angle_rad, core.keyframe_angle_rad);
   EXPECT_EQ(parameters.odometry.deskew_passes, core.deskew_passes);
+  EXPECT_EQ(parameters.odometry.max_speed_mps, core.max_speed_mps);
+  EXPECT_NEAR(parameters.odometry.max_angular_rate_radps, core.max_angular_rate_radps, 1e-12);
+  EXPECT_EQ(parameters.odometry.max_acceleration_mps2, core.max_acceleration_mps2);
+  EXPECT_EQ(parameters.odometry.velocity_decay_time_s, core.velocity_decay_time_s);
   EXPECT_EQ(parameters.odometry.registration.gate_grows_with_stride, core.registration.gate_grows_with_stride);
 }
 
@@ -55,7 +59,15 @@ TEST(OdometryParameters, ValuesReachTheCoreOptions) {
   node.setParam("min_inliers", 50);
   node.setParam("gate_grows_with_stride", false);
   node.setParam("deskew_passes", 3);
+  node.setParam("max_speed", 5.0);
+  node.setParam("max_angular_rate_deg", 90.0);
+  node.setParam("max_acceleration", 0);  // 0: off
+  node.setParam("velocity_decay_time", 2.5);
   const OdometryParameters parameters = readOdometryParameters(node);
+  EXPECT_EQ(parameters.odometry.max_speed_mps, 5.0);
+  EXPECT_NEAR(parameters.odometry.max_angular_rate_radps, M_PI / 2, 1e-12);
+  EXPECT_EQ(parameters.odometry.max_acceleration_mps2, 0.0);
+  EXPECT_EQ(parameters.odometry.velocity_decay_time_s, 2.5);
   EXPECT_FALSE(parameters.odometry.registration.gate_grows_with_stride);
   EXPECT_EQ(parameters.odometry.deskew_passes, 3);
   EXPECT_EQ(parameters.odom_frame, "wheel_odom");
@@ -98,6 +110,8 @@ TEST(OdometryParameters, BadValuesAreErrorsNamingTheParameter) {
   EXPECT_NE(flag.find("publish_tf must be true or false, got a int"), std::string::npos) << flag;
   const std::string gap = error_for("max_time_gap", 0.0);
   EXPECT_NE(gap.find("max_time_gap is 0"), std::string::npos) << gap;
+  const std::string speed = error_for("max_speed", -1.0);
+  EXPECT_NE(speed.find("max_speed is -1"), std::string::npos) << speed;
 }
 
 // The nodelet refuses to start, saying which parameter.

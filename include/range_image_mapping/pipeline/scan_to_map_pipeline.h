@@ -34,7 +34,8 @@ struct PipelineOptions {
   // Given poses without a twist: the twist from the previous given pose, if
   // it is at most this much older (a gap or a restart gives none).
   double given_twist_max_gap_s = 0.5;
-  // The robot's base from the lidar, for poses and twists of the base.
+  // The robot's base from the lidar, for poses of the base. With the odometry,
+  // the world (odom, REP 105) is the base at the first scan.
   Eigen::Isometry3d base_from_lidar = Eigen::Isometry3d::Identity();
   // Throws std::invalid_argument naming the field.
   void validate() const;
