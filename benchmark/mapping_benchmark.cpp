@@ -153,7 +153,7 @@ Row runOurs(const test::MappingPreset& preset, const SequenceAndScene& truth, in
     row.mesh_pending.push_back(double(update.pending));
   }
   const Timer full;
-  const mapping::TriangleMeshData mesh = mapping::extractMesh(grid);
+  const TriangleMesh mesh = mapping::extractMesh(grid);
   row.full_mesh_s = full.wall();
   row.cells = grid.blockCount();
   row.memory_bytes = grid.memoryBytes();

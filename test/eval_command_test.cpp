@@ -5,8 +5,8 @@
 #include "range_image_mapping/io/kitti.h"
 #include "range_image_mapping/io/ply.h"
 #include "range_image_mapping/io/pose_file.h"
-#include "range_image_mapping/simulation/surface_sampler.h"
-#include "range_image_mapping/simulation/triangle_mesh.h"
+#include "range_image_mapping/simulation/mesh_primitives.h"
+#include "range_image_mapping/surface_sampling.h"
 #include "rim_command.h"
 #include "test_data.h"
 
@@ -69,7 +69,7 @@ std::vector<Eigen::Isometry3d> offset(const std::vector<Eigen::Isometry3d>& pose
 }
 
 void writeQuad(const std::string& path, float width, float depth, float height) {
-  const simulation::TriangleMesh quad = simulation::makeQuad(
+  const TriangleMesh quad = simulation::makeQuad(
       Eigen::Vector3f(0, 0, height), Eigen::Vector3f(width, 0, 0), Eigen::Vector3f(0, depth, 0));
   io::writePlyMesh(path, quad.vertices, {}, quad.triangles);
 }
@@ -247,11 +247,11 @@ TEST_F(EvalCommand, MeshAgainstItselfAndShifted) {
 
 TEST_F(EvalCommand, CloudMissingHalfOfTheGroundTruthAndItsMaps) {
   writeQuad(path("truth.ply"), 2, 1, 0);
-  const simulation::TriangleMesh half = simulation::makeQuad(Eigen::Vector3f::Zero(), Eigen::Vector3f(1, 0, 0),
-                                                             Eigen::Vector3f(0, 1, 0));
-  simulation::SurfaceSampleOptions sampling;
+  const TriangleMesh half =
+      simulation::makeQuad(Eigen::Vector3f::Zero(), Eigen::Vector3f(1, 0, 0), Eigen::Vector3f(0, 1, 0));
+  SurfaceSampleOptions sampling;
   sampling.spacing_m = 0.005;
-  const std::vector<Eigen::Vector3f> cloud = simulation::sampleSurface(half, sampling);
+  const std::vector<Eigen::Vector3f> cloud = sampleSurface(half, sampling);
   io::writePlyPointCloud(path("half_cloud.ply"), cloud);
   const RunResult run = rim("eval mesh '" + path("half_cloud.ply") + "' '" + path("truth.ply") +
                             "' --threshold 0.02 --plots '" + path("maps") + "' --json -");

@@ -5,6 +5,7 @@
 #include "range_image_mapping/io/kitti.h"
 #include "range_image_mapping/ouster_metadata.h"
 #include "range_image_mapping/simulation/lidar_simulator.h"
+#include "range_image_mapping/simulation/mesh_primitives.h"
 #include "mesh_reference.h"
 #include "test_data.h"
 

@@ -55,7 +55,7 @@ TEST_F(MapCommand, IndoorCartAtGroundTruthPosesMatchesTheSimulatedSurface) {
   // lb_n3, 0.66 handheld, measured below) cannot pass.
   EXPECT_GT(f_score, 0.97);
 
-  const io::PlyMesh mesh = io::readPlyMesh(path("ic/mesh.ply"));
+  const TriangleMesh mesh = io::readPlyMesh(path("ic/mesh.ply"));
   EXPECT_EQ(mesh.vertices.size(), report["vertices"].asUInt64());
   EXPECT_EQ(mesh.triangles.size(), report["triangles"].asUInt64());
   EXPECT_GT(mesh.triangles.size(), 10000u);
@@ -126,7 +126,7 @@ TEST_F(MapCommand, RealLbN3FramesLandOnTheReferenceMap) {
   ASSERT_EQ(run.exit_code, 0) << run.err;
   const Json::Value report = readJson(path("lb.json"));
   EXPECT_EQ(report["scans_integrated"].asInt(), 3);
-  const io::PlyMesh mesh = io::readPlyMesh(path("lb.ply"));
+  const TriangleMesh mesh = io::readPlyMesh(path("lb.ply"));
   ASSERT_GT(mesh.vertices.size(), 1000u);
   const std::vector<float> distances =
       evaluation::nearestDistances(mesh.vertices, io::readPlyPoints(reference_path));

@@ -8,6 +8,7 @@
 
 #include "range_image_mapping/evaluation/surface_metrics.h"
 #include "range_image_mapping/mapping/tsdf_map.h"
+#include "range_image_mapping/simulation/mesh_primitives.h"
 
 #include <gtest/gtest.h>
 
@@ -163,8 +164,8 @@ LidarModelConstPtr os0Model() {
 
 // scans_per_circle scans spread over one lap of each circle, with the presets'
 // 1 cm noise and the true sweep twist, integrated into a 4 cm, 10 m map.
-TsdfMap mapAnalyticScene(const simulation::TriangleMesh& scene, const std::vector<CircleTrajectory>& circles,
-                         int scans_per_circle, double yaw_rate) {
+TsdfMap mapAnalyticScene(const TriangleMesh& scene, const std::vector<CircleTrajectory>& circles, int scans_per_circle,
+                         double yaw_rate) {
   const simulation::RayCaster caster(scene);
   simulation::SensorEffects effects;
   effects.range_noise_sigma_m = 0.01;
@@ -200,7 +201,7 @@ TEST(MappingAccuracy, BoxRoomMeshesToAClosedSurface) {
   const double yaw_rate = 0.5;
   const std::vector<CircleTrajectory> laps{{{0.2, 0.1, 1.0}, 1.5, yaw_rate}, {{-0.1, 0.2, 2.0}, 1.5, yaw_rate}};
   const TsdfMap map = mapAnalyticScene(simulation::makeBox(low, high, true), laps, 12, yaw_rate);
-  const TriangleMeshData mesh = extractMesh(map.grid());
+  const TriangleMesh mesh = extractMesh(map.grid());
   ASSERT_GT(mesh.triangles.size(), 1000u);
   EXPECT_EQ(countBoundaryEdges(mesh.triangles), 0u);
   // Every vertex on a wall (noise averaged over 24 scans: well within a voxel).
@@ -227,12 +228,12 @@ TEST(MappingAccuracy, BoxRoomMeshesToAClosedSurface) {
 TEST(MappingAccuracy, SphereMeshLiesOnTheTrueRadius) {
   const Eigen::Vector3f centre(0.0f, 0.0f, 1.6f);
   const float radius = 0.8f;
-  simulation::TriangleMesh scene = simulation::makeBox({-4.0f, -4.0f, 0.0f}, {4.0f, 4.0f, 3.5f}, true);
+  TriangleMesh scene = simulation::makeBox({-4.0f, -4.0f, 0.0f}, {4.0f, 4.0f, 3.5f}, true);
   scene.append(simulation::makeSphere(centre, radius, 6));
   const double yaw_rate = 0.5;
   const std::vector<CircleTrajectory> laps{{{0, 0, 0.6}, 2.2, yaw_rate}, {{0, 0, 2.8}, 2.2, yaw_rate}};
   const TsdfMap map = mapAnalyticScene(scene, laps, 24, yaw_rate);
-  const TriangleMeshData mesh = extractMesh(map.grid());
+  const TriangleMesh mesh = extractMesh(map.grid());
   std::vector<double> errors;
   for (const Eigen::Vector3f& vertex : mesh.vertices) {
     const double distance = (vertex - centre).norm();

@@ -4,6 +4,7 @@
 // pattern and both choices on ambiguous faces.
 #include "range_image_mapping/mapping/marching_cubes.h"
 
+#include "range_image_mapping/io/mesh_file.h"
 #include "range_image_mapping/io/ply.h"
 
 #include <gtest/gtest.h>
@@ -105,7 +106,7 @@ Position positionOf(const Eigen::Vector3f& v) { return {v.x(), v.y(), v.z()}; }
 
 // Triangles as vertex positions, rotated so the smallest comes first (the
 // winding is kept): equal sets mean the same surface whatever the indexing.
-std::multiset<TrianglePositions> triangleSet(const TriangleMeshData& mesh) {
+std::multiset<TrianglePositions> triangleSet(const TriangleMesh& mesh) {
   std::multiset<TrianglePositions> set;
   for (const Eigen::Vector3i& t : mesh.triangles) {
     TrianglePositions corners{positionOf(mesh.vertices[t[0]]), positionOf(mesh.vertices[t[1]]),
@@ -116,7 +117,7 @@ std::multiset<TrianglePositions> triangleSet(const TriangleMeshData& mesh) {
   return set;
 }
 
-std::vector<Position> sortedVertices(const TriangleMeshData& mesh) {
+std::vector<Position> sortedVertices(const TriangleMesh& mesh) {
   std::vector<Position> sorted;
   for (const Eigen::Vector3f& v : mesh.vertices) sorted.push_back(positionOf(v));
   std::sort(sorted.begin(), sorted.end());
@@ -132,7 +133,7 @@ std::map<std::pair<int, int>, int> directedEdgeUses(const std::vector<Eigen::Vec
 
 // A closed, consistently oriented 2-manifold: every edge is walked exactly
 // once in each direction by the two triangles that share it.
-void expectClosedAndOriented(const TriangleMeshData& mesh) {
+void expectClosedAndOriented(const TriangleMesh& mesh) {
   const auto uses = directedEdgeUses(mesh.triangles);
   std::size_t bad = 0;
   for (const auto& [edge, count] : uses) {
@@ -145,7 +146,7 @@ void expectClosedAndOriented(const TriangleMeshData& mesh) {
     ASSERT_TRUE(t[0] != t[1] && t[1] != t[2] && t[0] != t[2]) << "triangle with a repeated vertex";
 }
 
-long eulerCharacteristic(const TriangleMeshData& mesh) {
+long eulerCharacteristic(const TriangleMesh& mesh) {
   std::set<std::pair<int, int>> edges;
   std::set<int> used;
   for (const Eigen::Vector3i& t : mesh.triangles)
@@ -156,7 +157,7 @@ long eulerCharacteristic(const TriangleMeshData& mesh) {
   return long(used.size()) - long(edges.size()) + long(mesh.triangles.size());
 }
 
-double area(const TriangleMeshData& mesh) {
+double area(const TriangleMesh& mesh) {
   double sum = 0.0;
   for (const Eigen::Vector3i& t : mesh.triangles) {
     const Eigen::Vector3d a = mesh.vertices[t[0]].cast<double>(), b = mesh.vertices[t[1]].cast<double>(),
@@ -191,7 +192,7 @@ TEST(MarchingCubes, SphereVerticesOnSurfaceNormalsOutwardClosedGenusZero) {
     SCOPED_TRACE("voxel " + std::to_string(sphere.voxel));
     const VoxelBlockGrid grid = sphereGrid(sphere.voxel, 8, sphere.centre, radius);
     ASSERT_GT(grid.blockCount(), 8u);  // spans many blocks
-    const TriangleMeshData mesh = extractMesh(grid);
+    const TriangleMesh mesh = extractMesh(grid);
     ASSERT_GT(mesh.triangles.size(), 100u);
     ASSERT_EQ(mesh.normals.size(), mesh.vertices.size());
     EXPECT_TRUE(mesh.intensities.empty());
@@ -240,7 +241,7 @@ TEST(MarchingCubes, BoxWithSharpCornersIsClosedWithTheRightArea) {
     fillGrid(grid, boxDistance(minimum, maximum),
              Eigen::AlignedBox3d(minimum - Eigen::Vector3d::Constant(1.0),
                                  maximum + Eigen::Vector3d::Constant(1.0)));
-    const TriangleMeshData mesh = extractMesh(grid);
+    const TriangleMesh mesh = extractMesh(grid);
     const double mesh_area = area(mesh);
     // Linear interpolation bevels the sharp edges: inside, near an edge, the
     // distance to the other face is the smaller one. The loss is a strip
@@ -301,10 +302,10 @@ TEST(MarchingCubes, RandomFieldsGiveClosedOrientedSurfacesIndependentOfBlockSize
     VoxelBlockGrid small_blocks({0.1, 8, false}), large_blocks({0.1, 16, false});
     fillRandomField(small_blocks, 22, seed);
     fillRandomField(large_blocks, 22, seed);
-    const TriangleMeshData mesh = extractMesh(small_blocks);
+    const TriangleMesh mesh = extractMesh(small_blocks);
     ASSERT_GT(mesh.triangles.size(), 10000u);
     expectClosedAndOriented(mesh);
-    const TriangleMeshData other = extractMesh(large_blocks);
+    const TriangleMesh other = extractMesh(large_blocks);
     EXPECT_EQ(sortedVertices(mesh), sortedVertices(other));
     EXPECT_TRUE(triangleSet(mesh) == triangleSet(other));
 
@@ -320,8 +321,8 @@ TEST(MarchingCubes, RandomFieldsGiveClosedOrientedSurfacesIndependentOfBlockSize
 
 TEST(MarchingCubes, SphereMeshDoesNotDependOnBlockBorders) {
   const Eigen::Vector3d centre(0.217, -0.093, 0.4411);
-  const TriangleMeshData small_blocks = extractMesh(sphereGrid(0.05, 8, centre, 0.9));
-  const TriangleMeshData large_blocks = extractMesh(sphereGrid(0.05, 16, centre, 0.9));
+  const TriangleMesh small_blocks = extractMesh(sphereGrid(0.05, 8, centre, 0.9));
+  const TriangleMesh large_blocks = extractMesh(sphereGrid(0.05, 16, centre, 0.9));
   ASSERT_GT(small_blocks.vertices.size(), 1000u);
   EXPECT_EQ(sortedVertices(small_blocks), sortedVertices(large_blocks));
   EXPECT_TRUE(triangleSet(small_blocks) == triangleSet(large_blocks));
@@ -336,11 +337,11 @@ TEST(MarchingCubes, MeshEndsWhereObservationsEnd) {
   FillOptions fill;
   fill.observed = [&](const Eigen::Vector3d& p) { return p.z() <= limit_z; };
   const VoxelBlockGrid half = sphereGrid(voxel, 8, centre, radius, fill);
-  const TriangleMeshData full = extractMesh(sphereGrid(voxel, 8, centre, radius));
+  const TriangleMesh full = extractMesh(sphereGrid(voxel, 8, centre, radius));
   // Voxels beyond the limit have weight 0.5: unobserved for min_weight 1.
   MeshOptions strict;
   strict.min_weight = 1.0f;
-  const TriangleMeshData mesh = extractMesh(half, strict);
+  const TriangleMesh mesh = extractMesh(half, strict);
   const double last_plane = std::floor(limit_z / voxel) * voxel;  // highest observed lattice plane
 
   std::size_t above = 0;
@@ -380,7 +381,7 @@ TEST(MarchingCubes, IntensityIsInterpolatedAlongTheEdge) {
   FillOptions fill;
   fill.intensity = [](const Eigen::Vector3d& p) { return 10.0 + 2.0 * p.x() - p.y() + 0.5 * p.z(); };
   const VoxelBlockGrid grid = sphereGrid(0.1, 8, {0.03, 0.02, 0.01}, 0.8, fill);
-  const TriangleMeshData mesh = extractMesh(grid);
+  const TriangleMesh mesh = extractMesh(grid);
   ASSERT_EQ(mesh.intensities.size(), mesh.vertices.size());
   ASSERT_FALSE(mesh.vertices.empty());
   for (std::size_t v = 0; v < mesh.vertices.size(); ++v)
@@ -396,7 +397,7 @@ std::vector<BlockKey> sortedKeys(std::vector<BlockKey> keys) {
   return keys;
 }
 
-void expectSameMesh(const TriangleMeshData& a, const TriangleMeshData& b) {
+void expectSameMesh(const TriangleMesh& a, const TriangleMesh& b) {
   EXPECT_EQ(a.vertices.size(), b.vertices.size());
   EXPECT_EQ(sortedVertices(a), sortedVertices(b));
   EXPECT_TRUE(triangleSet(a) == triangleSet(b));
@@ -477,7 +478,7 @@ TEST(MeshExtractor, RebuildsChangedBlocksAndTheirLowerNeighboursOnly) {
   const MeshUpdate removal = extractor.update(grid);
   EXPECT_EQ(removal.removed, sortedKeys(expected_removed));
   for (const BlockKey& key : removed_blocks) EXPECT_EQ(extractor.chunk(key), nullptr);
-  const TriangleMeshData after_removal = extractor.combined();
+  const TriangleMesh after_removal = extractor.combined();
   expectSameMesh(after_removal, extractMesh(grid));
   EXPECT_GT(countBoundaryEdges(after_removal.triangles), 0u);  // the cut is open
 
@@ -570,13 +571,13 @@ TEST(MeshExtractor, SpeedOnAMillionVoxelsWithTwoThreads) {
   EXPECT_GT(voxels, 800000u);
 
   auto start = std::chrono::steady_clock::now();
-  const TriangleMeshData mesh = extractMesh(grid);
+  const TriangleMesh mesh = extractMesh(grid);
   const double whole_seconds = secondsSince(start);
 
   MeshExtractor extractor;
   const MeshUpdate first = extractor.update(grid);
   start = std::chrono::steady_clock::now();
-  const TriangleMeshData combined = extractor.combined();
+  const TriangleMesh combined = extractor.combined();
   const double combine_seconds = secondsSince(start);
   EXPECT_EQ(combined.triangles.size(), mesh.triangles.size());
 
@@ -596,14 +597,14 @@ TEST(MeshExtractor, SpeedOnAMillionVoxelsWithTwoThreads) {
 
 // ---------------------------------------------------------------- files and bad input
 
-TEST(MarchingCubes, PlyRoundTripKeepsVerticesTrianglesNormalsAndIntensity) {
+TEST(MarchingCubes, SavedMeshKeepsVerticesTrianglesNormalsAndIntensity) {
   FillOptions fill;
   fill.intensity = [](const Eigen::Vector3d& p) { return 100.0 * p.z(); };
-  const TriangleMeshData mesh = extractMesh(sphereGrid(0.1, 8, {0.01, 0.02, 0.03}, 0.6, fill));
+  const TriangleMesh mesh = extractMesh(sphereGrid(0.1, 8, {0.01, 0.02, 0.03}, 0.6, fill));
   ASSERT_FALSE(mesh.triangles.empty());
   const std::string path = temporaryPath("sphere.ply");
-  writeMeshPly(path, mesh);
-  const io::PlyMesh read = io::readPlyMesh(path);
+  io::saveMeshFile(path, mesh);
+  const TriangleMesh read = io::readPlyMesh(path);
   EXPECT_EQ(read.vertices, mesh.vertices);
   EXPECT_EQ(read.triangles, mesh.triangles);
 
@@ -623,12 +624,12 @@ TEST(MarchingCubes, PlyRoundTripKeepsVerticesTrianglesNormalsAndIntensity) {
   }
   std::remove(path.c_str());
 
-  TriangleMeshData bad = mesh;
+  TriangleMesh bad = mesh;
   bad.intensities.pop_back();
-  EXPECT_THROW(writeMeshPly(path, bad), MappingError);
+  EXPECT_THROW(io::saveMeshFile(path, bad), std::invalid_argument);
   bad = mesh;
   bad.normals.pop_back();
-  EXPECT_THROW(writeMeshPly(path, bad), std::invalid_argument);
+  EXPECT_THROW(io::saveMeshFile(path, bad), std::invalid_argument);
 }
 
 TEST(MarchingCubes, BadInputIsRefusedWithAClearError) {

@@ -12,8 +12,6 @@
 namespace range_image_mapping::io {
 namespace {
 
-using simulation::TriangleMesh;
-
 std::string temporaryPath(const std::string& name) {
   return (std::filesystem::temp_directory_path() / ("rim_mesh_file_test_" + name)).string();
 }

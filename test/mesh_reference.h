@@ -1,7 +1,7 @@
 // Reference geometry for tests: ray-mesh distances by brute force in double.
 #pragma once
 
-#include "range_image_mapping/simulation/triangle_mesh.h"
+#include "range_image_mapping/triangle_mesh.h"
 
 #include <cmath>
 #include <limits>
@@ -10,7 +10,7 @@ namespace range_image_mapping::test {
 
 // Moller-Trumbore over every triangle: the nearest hit along the unit
 // direction, or NaN.
-inline double bruteForceDistance(const simulation::TriangleMesh& mesh, const Eigen::Vector3d& origin,
+inline double bruteForceDistance(const TriangleMesh& mesh, const Eigen::Vector3d& origin,
                                  const Eigen::Vector3d& direction) {
   double best = std::numeric_limits<double>::quiet_NaN();
   for (const Eigen::Vector3i& t : mesh.triangles) {

@@ -3,6 +3,7 @@
 // in front of a far wall (a depth edge).
 #include "range_image_mapping/normal_map.h"
 #include "range_image_mapping/simulation/lidar_simulator.h"
+#include "range_image_mapping/simulation/mesh_primitives.h"
 #include "range_image_mapping/simulation/sensor_presets.h"
 
 #include <gtest/gtest.h>
@@ -22,7 +23,7 @@ LidarModelConstPtr ousterLikeModel() {
 
 // One scan from the identity pose with the exact (unquantised) ranges, so
 // that the geometry, not millimetre steps, is under test.
-RangeImage exactScan(const simulation::TriangleMesh& mesh, const LidarModelConstPtr& model) {
+RangeImage exactScan(const TriangleMesh& mesh, const LidarModelConstPtr& model) {
   const simulation::RayCaster caster(mesh);
   simulation::SensorEffects effects;
   effects.motion_distortion = false;
@@ -112,7 +113,7 @@ class DepthEdge : public ::testing::TestWithParam<NormalMethod> {};
 
 TEST_P(DepthEdge, PixelsBetweenNearAndFarSurfacesHaveNoNormal) {
   // A 2 m panel 3 m ahead in front of a wall 12 m ahead.
-  simulation::TriangleMesh scene = simulation::makeQuad({3.0f, 1.0f, -1.0f}, {0.0f, -2.0f, 0.0f}, {0.0f, 0.0f, 2.0f});
+  TriangleMesh scene = simulation::makeQuad({3.0f, 1.0f, -1.0f}, {0.0f, -2.0f, 0.0f}, {0.0f, 0.0f, 2.0f});
   scene.append(simulation::makeQuad({12.0f, 10.0f, -8.0f}, {0.0f, -20.0f, 0.0f}, {0.0f, 0.0f, 16.0f}));
   const RangeImage image = exactScan(scene, ousterLikeModel());
   NormalMapOptions options;

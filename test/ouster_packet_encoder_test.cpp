@@ -688,8 +688,8 @@ TEST(KittiWriter, VelodyneScanRoundTrip) {
 // ------------------------------------------------------------ surface sample
 
 // A 10 x 8 x 3 m room, as two triangles per wall.
-simulation::TriangleMesh boxRoom() {
-  simulation::TriangleMesh mesh;
+TriangleMesh boxRoom() {
+  TriangleMesh mesh;
   for (int i = 0; i < 8; ++i) mesh.vertices.emplace_back(i & 1 ? 10.0f : 0.0f, i & 2 ? 8.0f : 0.0f, i & 4 ? 3.0f : 0.0f);
   const int faces[6][4] = {{0, 1, 3, 2}, {4, 6, 7, 5}, {0, 4, 5, 1}, {2, 3, 7, 6}, {0, 2, 6, 4}, {1, 5, 7, 3}};
   for (const auto& face : faces) {
@@ -700,10 +700,10 @@ simulation::TriangleMesh boxRoom() {
 }
 
 TEST(SurfaceSampler, DenseAreaWeightedAndDeterministic) {
-  const simulation::TriangleMesh room = boxRoom();
-  simulation::SurfaceSampleOptions options;
+  const TriangleMesh room = boxRoom();
+  SurfaceSampleOptions options;
   options.spacing_m = 0.05;
-  const std::vector<Eigen::Vector3f> samples = simulation::sampleSurface(room, options);
+  const std::vector<Eigen::Vector3f> samples = sampleSurface(room, options);
   const double area = 2 * (10 * 8) + 2 * (10 * 3) + 2 * (8 * 3);
   EXPECT_NEAR(double(samples.size()), area / (0.05 * 0.05), 0.01 * area / (0.05 * 0.05));
   // Each wall gets its share of the area.
@@ -712,16 +712,16 @@ TEST(SurfaceSampler, DenseAreaWeightedAndDeterministic) {
   EXPECT_NEAR(floor_count, 80 / (0.05 * 0.05), 0.02 * 80 / (0.05 * 0.05));
   for (const Eigen::Vector3f& p : samples)
     ASSERT_TRUE((p.array() >= -1e-4f).all() && p.x() <= 10.0001f && p.y() <= 8.0001f && p.z() <= 3.0001f);
-  EXPECT_EQ(simulation::sampleSurface(room, options), samples);
+  EXPECT_EQ(sampleSurface(room, options), samples);
   options.seed = 2;
-  EXPECT_NE(simulation::sampleSurface(room, options), samples);
+  EXPECT_NE(sampleSurface(room, options), samples);
 
   options.spacing_m = 0;
-  EXPECT_THROW(simulation::sampleSurface(room, options), std::invalid_argument);
-  simulation::TriangleMesh broken = room;
+  EXPECT_THROW(sampleSurface(room, options), std::invalid_argument);
+  TriangleMesh broken = room;
   broken.triangles.emplace_back(0, 1, 8);
   options.spacing_m = 0.05;
-  EXPECT_THROW(simulation::sampleSurface(broken, options), std::invalid_argument);
+  EXPECT_THROW(sampleSurface(broken, options), std::invalid_argument);
   EXPECT_THROW(simulation::SeenRegion(0.0), std::invalid_argument);
 }
 
@@ -738,10 +738,10 @@ TEST(SurfaceSampler, KeepsOnlyWhatTheSensorSaw) {
   simulation::SeenRegion seen(kSeenDistance);
   seen.addHits(hits);
 
-  const simulation::TriangleMesh room = boxRoom();
-  simulation::SurfaceSampleOptions options;
+  const TriangleMesh room = boxRoom();
+  SurfaceSampleOptions options;
   options.spacing_m = 0.02;
-  const std::vector<Eigen::Vector3f> all = simulation::sampleSurface(room, options);
+  const std::vector<Eigen::Vector3f> all = sampleSurface(room, options);
   const std::vector<Eigen::Vector3f> kept = simulation::sampleSeenSurface(room, seen, options);
 
   // Distance to the hit rectangles; the hits are a 5 cm grid on them.

@@ -8,6 +8,7 @@
 #include "range_image_mapping/registration/projective_icp.h"
 #include "range_image_mapping/scan_motion.h"
 #include "range_image_mapping/simulation/lidar_simulator.h"
+#include "range_image_mapping/simulation/mesh_primitives.h"
 #include "range_image_mapping/simulation/scene_generator.h"
 #include "range_image_mapping/simulation/sensor_presets.h"
 #include "test_data.h"
@@ -190,7 +191,7 @@ TEST(RealRegistration, OusterLbN3AgainstReferencePoses) {
 
 // ------------------------------------------------------------ degenerate and bad input
 
-RangeImage scanOf(const simulation::TriangleMesh& mesh, const LidarModelConstPtr& model, const Eigen::Isometry3d& pose) {
+RangeImage scanOf(const TriangleMesh& mesh, const LidarModelConstPtr& model, const Eigen::Isometry3d& pose) {
   const simulation::RayCaster caster(mesh);
   simulation::SensorEffects effects;
   effects.motion_distortion = false;
@@ -200,7 +201,7 @@ RangeImage scanOf(const simulation::TriangleMesh& mesh, const LidarModelConstPtr
 
 TEST(DegenerateRegistration, SinglePlaneHasALargeConditionNumber) {
   const LidarModelConstPtr model = ousterLikeModel("OS-0-128");
-  const simulation::TriangleMesh floor =
+  const TriangleMesh floor =
       simulation::makeQuad({-30.0f, -30.0f, 0.0f}, {60.0f, 0.0f, 0.0f}, {0.0f, 60.0f, 0.0f});
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
   pose.translation() = Eigen::Vector3d(0, 0, 1.5);
@@ -375,7 +376,7 @@ TEST(ColumnMotion, DeskewInsideTheRegistrationRecoversAMovingScan) {
 // full-resolution target map gives the same pyramid as the image.
 TEST(LevelSchedule, RunsOnlyTheLevelsAndStepsAsked) {
   const LidarModelConstPtr model = ousterLikeModel("OS-0-128");
-  const simulation::TriangleMesh room = simulation::makeBox({-5.0f, -4.0f, -1.5f}, {6.0f, 5.0f, 2.5f}, true);
+  const TriangleMesh room = simulation::makeBox({-5.0f, -4.0f, -1.5f}, {6.0f, 5.0f, 2.5f}, true);
   const simulation::RayCaster caster(room);
   simulation::SensorEffects effects;
   effects.motion_distortion = false;

@@ -1,5 +1,6 @@
 // Analytic primitives and Embree ray casting against exact (double) answers.
 #include "range_image_mapping/simulation/ray_caster.h"
+#include "range_image_mapping/simulation/mesh_primitives.h"
 #include "mesh_reference.h"
 
 #include <gtest/gtest.h>

@@ -1,4 +1,5 @@
 #include "range_image_mapping/simulation/scene_generator.h"
+#include "range_image_mapping/simulation/mesh_primitives.h"
 
 #include <gtest/gtest.h>
 

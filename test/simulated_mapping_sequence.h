@@ -133,13 +133,10 @@ inline std::vector<Eigen::Vector3f> sceneSurfaceNearRoute(const MappingPreset& p
 
 // A mesh as surface samples for compareSurfaces: a grid of the given spacing
 // on every triangle (the preset's sampleSpacingM(), as rim eval mesh does).
-inline std::vector<Eigen::Vector3f> meshSamples(const mapping::TriangleMeshData& mesh, double spacing_m) {
-  simulation::TriangleMesh triangles;
-  triangles.vertices = mesh.vertices;
-  triangles.triangles = mesh.triangles;
-  simulation::SurfaceSampleOptions sampling;
+inline std::vector<Eigen::Vector3f> meshSamples(const TriangleMesh& mesh, double spacing_m) {
+  SurfaceSampleOptions sampling;
   sampling.spacing_m = spacing_m;
-  return simulation::sampleSurface(triangles, sampling);
+  return sampleSurface(mesh, sampling);
 }
 
 }  // namespace range_image_mapping::test

@@ -2,7 +2,8 @@
 
 #include "range_image_mapping/evaluation/report.h"
 #include "range_image_mapping/io/ply.h"
-#include "range_image_mapping/simulation/surface_sampler.h"
+#include "range_image_mapping/simulation/mesh_primitives.h"
+#include "range_image_mapping/surface_sampling.h"
 
 #include "error_text.h"
 
@@ -19,7 +20,6 @@
 namespace range_image_mapping::evaluation {
 namespace {
 
-using simulation::TriangleMesh;
 
 std::string temporaryPath(const std::string& name) {
   return (std::filesystem::temp_directory_path() / ("rim_surface_metrics_test_" + name)).string();
@@ -34,12 +34,12 @@ TriangleMesh plane(float width, float depth, float height) {
                               Eigen::Vector3f(0, depth, 0));
 }
 
-// The sampler rim eval mesh uses (simulation::sampleSurface).
+// The sampler rim eval mesh uses (range_image_mapping::sampleSurface).
 std::vector<Eigen::Vector3f> sampleSurface(const TriangleMesh& mesh, double spacing, uint32_t seed) {
-  simulation::SurfaceSampleOptions options;
+  SurfaceSampleOptions options;
   options.spacing_m = spacing;
   options.seed = seed;
-  return simulation::sampleSurface(mesh, options);
+  return range_image_mapping::sampleSurface(mesh, options);
 }
 
 std::vector<Eigen::Vector3f> randomPoints(std::size_t count, uint32_t seed) {

@@ -5,6 +5,7 @@
 #include "range_image_mapping/mapping/tsdf_integrator.h"
 #include "range_image_mapping/ouster_metadata.h"
 #include "range_image_mapping/simulation/lidar_simulator.h"
+#include "range_image_mapping/simulation/mesh_primitives.h"
 #include "range_image_mapping/simulation/sensor_presets.h"
 #include "error_text.h"
 #include "test_data.h"
@@ -28,7 +29,6 @@ using simulation::LidarSimulator;
 using simulation::RayCaster;
 using simulation::SensorEffects;
 using simulation::SimulatedScan;
-using simulation::TriangleMesh;
 using test::contains;
 using test::errorOf;
 
@@ -284,7 +284,7 @@ GroundCoverage integrateGround(SignedDistance signed_distance, double noise_m, d
                                double plane_fill_m = 0.0) {
   const TriangleMesh ground = simulation::makeQuad(Eigen::Vector3f(-60, -60, 0), Eigen::Vector3f(120, 0, 0),
                                                    Eigen::Vector3f(0, 120, 0));
-  simulation::TriangleMesh sloped = ground;
+  TriangleMesh sloped = ground;
   for (Eigen::Vector3f& vertex : sloped.vertices) vertex.z() = float(std::tan(tilt_rad) * vertex.x());
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
   pose.translation() = Eigen::Vector3d(0.03, -0.02, kSensorHeight);

@@ -6,6 +6,7 @@
 #include "range_image_mapping/mapping/tsdf_map.h"
 #include "range_image_mapping/ouster_metadata.h"
 #include "range_image_mapping/simulation/lidar_simulator.h"
+#include "range_image_mapping/simulation/mesh_primitives.h"
 #include "range_image_mapping/simulation/sensor_presets.h"
 #include "error_text.h"
 #include "test_data.h"
@@ -22,7 +23,6 @@
 namespace range_image_mapping::mapping {
 namespace {
 
-using simulation::TriangleMesh;
 using test::contains;
 using test::errorOf;
 
@@ -228,7 +228,7 @@ TEST(TsdfMap, MeshFollowsTheMapAndIsSavedAsPly) {
   // Nothing changed: nothing to re-mesh.
   EXPECT_TRUE(map.updateMesh().changed.empty());
   const std::string path = ::testing::TempDir() + "tsdf_map_test_mesh.ply";
-  map.saveMesh(path);
+  io::saveMeshFile(path, map.fullMesh());
   const TriangleMesh saved = io::loadMeshFile(path);
   EXPECT_EQ(saved.triangles.size(), map.mesh().combined().triangles.size());
   // The mesh lies on the hall's faces. The nearest pixel's range differs from
@@ -268,8 +268,8 @@ TEST(TsdfMap, FullMeshIsExactWhateverTheUpdateBudget) {
     map.updateMesh();
   }
   ASSERT_GT(map.mesh().pendingCount(), 0u) << "the budget should have left blocks to mesh";
-  const TriangleMeshData full = map.fullMesh();
-  const TriangleMeshData reference = extractMesh(map.grid(), options.mesh);
+  const TriangleMesh full = map.fullMesh();
+  const TriangleMesh reference = extractMesh(map.grid(), options.mesh);
   EXPECT_EQ(map.mesh().pendingCount(), 0u);
   ASSERT_GT(reference.triangles.size(), 1000u);
   EXPECT_EQ(full.triangles.size(), reference.triangles.size());

@@ -2,7 +2,7 @@
 
 #include "range_image_mapping/io/mesh_file.h"
 #include "range_image_mapping/io/ply.h"
-#include "range_image_mapping/simulation/surface_sampler.h"
+#include "range_image_mapping/surface_sampling.h"
 
 #include <nanoflann.hpp>
 #include <tbb/blocked_range.h>
@@ -97,7 +97,7 @@ SurfaceSample loadSurfaceSample(const std::string& path, const SurfaceSamplingOp
   const std::string extension = lowerCaseExtension(path);
   SurfaceSample sample;
   if (extension == ".obj" || (extension == ".ply" && plyDeclaresFaces(path))) {
-    const simulation::TriangleMesh mesh = io::loadMeshFile(path);
+    const TriangleMesh mesh = io::loadMeshFile(path);
     sample.from_mesh = true;
     sample.vertex_count = mesh.vertices.size();
     sample.triangle_count = mesh.triangles.size();
@@ -115,10 +115,10 @@ SurfaceSample loadSurfaceSample(const std::string& path, const SurfaceSamplingOp
                                   std::to_string(static_cast<long long>(expected)) +
                                   " samples, more than " + std::to_string(options.max_points) +
                                   "; choose a larger spacing");
-    simulation::SurfaceSampleOptions sampling;
+    SurfaceSampleOptions sampling;
     sampling.spacing_m = options.spacing_m;
     sampling.seed = options.seed;
-    sample.points = simulation::sampleSurface(mesh, sampling);
+    sample.points = sampleSurface(mesh, sampling);
   } else if (extension == ".ply") {
     sample.points = io::readPlyPoints(path);
     sample.vertex_count = sample.points.size();

@@ -1,6 +1,6 @@
 #include "range_image_mapping/io/kitti.h"
 
-#include "little_endian.h"
+#include "../sensor/little_endian.h"
 
 #include <cmath>
 #include <fstream>

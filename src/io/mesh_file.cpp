@@ -28,7 +28,7 @@ class ObjParser {
  public:
   ObjParser(const std::string& path, const std::string& text) : path_(path), text_(text) {}
 
-  simulation::TriangleMesh parse() {
+  TriangleMesh parse() {
     while (nextStatement()) {
       const std::size_t keyword_end = statement_.find_first_of(" \t");
       const std::string keyword = statement_.substr(0, keyword_end);
@@ -162,21 +162,18 @@ class ObjParser {
   std::vector<int> polygon_;
   long long largest_index_ = -1;
   int largest_index_line_ = 0;
-  simulation::TriangleMesh mesh_;
+  TriangleMesh mesh_;
 };
 
-simulation::TriangleMesh loadObj(const std::string& path) {
+TriangleMesh loadObj(const std::string& path) {
   std::ifstream file(path, std::ios::binary);
   if (!file) throw MeshFileError("OBJ: cannot open " + path);
   const std::string text((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
   return ObjParser(path, text).parse();
 }
 
-simulation::TriangleMesh loadPly(const std::string& path) {
-  PlyMesh ply = readPlyMesh(path);
-  simulation::TriangleMesh mesh;
-  mesh.vertices = std::move(ply.vertices);
-  mesh.triangles = std::move(ply.triangles);
+TriangleMesh loadPly(const std::string& path) {
+  TriangleMesh mesh = readPlyMesh(path);
   for (std::size_t i = 0; i < mesh.vertices.size(); ++i)
     if (!mesh.vertices[i].allFinite())
       throw MeshFileError("PLY: " + path + " vertex " + std::to_string(i) + " is not finite");
@@ -185,9 +182,9 @@ simulation::TriangleMesh loadPly(const std::string& path) {
 
 }  // namespace
 
-simulation::TriangleMesh loadMeshFile(const std::string& path) {
+TriangleMesh loadMeshFile(const std::string& path) {
   const std::string extension = lowerCaseExtension(path);
-  simulation::TriangleMesh mesh;
+  TriangleMesh mesh;
   if (extension == ".ply")
     mesh = loadPly(path);
   else if (extension == ".obj")
@@ -199,10 +196,12 @@ simulation::TriangleMesh loadMeshFile(const std::string& path) {
   return mesh;
 }
 
-void saveMeshFile(const std::string& path, const simulation::TriangleMesh& mesh) {
+void saveMeshFile(const std::string& path, const TriangleMesh& mesh) {
   if (lowerCaseExtension(path) != ".ply")
     throw MeshFileError("mesh file " + path + ": meshes are saved as PLY; use the .ply extension");
-  writePlyMesh(path, mesh.vertices, {}, mesh.triangles);
+  std::vector<PlyProperty> properties;
+  if (!mesh.intensities.empty()) properties.push_back({"intensity", mesh.intensities});
+  writePlyMesh(path, mesh.vertices, mesh.normals, mesh.triangles, properties);
 }
 
 }  // namespace range_image_mapping::io

@@ -1,6 +1,6 @@
 #include "range_image_mapping/io/ply.h"
 
-#include "little_endian.h"
+#include "../sensor/little_endian.h"
 #include "triangle_fan.h"
 
 #include <algorithm>
@@ -493,13 +493,13 @@ std::vector<Eigen::Vector3f> readPlyPoints(const std::string& path) {
   return readVertexPositions(body, positions);
 }
 
-PlyMesh readPlyMesh(const std::string& path) {
+TriangleMesh readPlyMesh(const std::string& path) {
   const std::string bytes = readWholeFile(path);
   const Header header = HeaderParser(path, bytes).parse();
   const VertexPositions positions = findVertexPositions(path, header);
   const std::size_t vertex_count = positions.element->count;
 
-  PlyMesh mesh;
+  TriangleMesh mesh;
   bool have_faces = false;
   BodyReader body(path, bytes, header);
   std::vector<int> polygon;

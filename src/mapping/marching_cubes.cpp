@@ -2,7 +2,6 @@
 
 #include "marching_cubes_cases.h"
 #include "number_text.h"
-#include "range_image_mapping/io/ply.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
@@ -293,8 +292,8 @@ class BlockMesher {
 
 // One mesh from chunks in the given order; the first chunk that cut a
 // lattice edge provides its vertex.
-TriangleMeshData weldChunks(const std::vector<const MeshChunk*>& chunks) {
-  TriangleMeshData mesh;
+TriangleMesh weldChunks(const std::vector<const MeshChunk*>& chunks) {
+  TriangleMesh mesh;
   std::size_t vertex_count = 0, triangle_count = 0;
   bool with_intensity = false, all_with_intensity = true;
   for (const MeshChunk* chunk : chunks) {
@@ -356,7 +355,7 @@ MeshChunk meshBlock(const VoxelBlockGrid& grid, const VoxelBlock& block, const M
   return mesher.mesh(grid, block, options);
 }
 
-TriangleMeshData extractMesh(const VoxelBlockGrid& grid, const MeshOptions& options) {
+TriangleMesh extractMesh(const VoxelBlockGrid& grid, const MeshOptions& options) {
   options.validate();
   std::vector<const VoxelBlock*> blocks = grid.blocks();
   std::sort(blocks.begin(), blocks.end(),
@@ -393,15 +392,6 @@ std::size_t countBoundaryEdges(const std::vector<Eigen::Vector3i>& triangles) {
     i = end;
   }
   return boundary;
-}
-
-void writeMeshPly(const std::string& path, const TriangleMeshData& mesh) {
-  if (!mesh.intensities.empty() && mesh.intensities.size() != mesh.vertices.size())
-    throw MappingError("writeMeshPly: " + std::to_string(mesh.intensities.size()) +
-                       " intensities for " + std::to_string(mesh.vertices.size()) + " vertices");
-  std::vector<io::PlyProperty> properties;
-  if (!mesh.intensities.empty()) properties.push_back({"intensity", mesh.intensities});
-  io::writePlyMesh(path, mesh.vertices, mesh.normals, mesh.triangles, properties);
 }
 
 // ---------------------------------------------------------------- MeshExtractor
@@ -536,7 +526,7 @@ std::size_t MeshExtractor::triangleCount() const {
   return count;
 }
 
-TriangleMeshData MeshExtractor::combined() const { return weldChunks(chunks()); }
+TriangleMesh MeshExtractor::combined() const { return weldChunks(chunks()); }
 
 std::size_t MeshExtractor::pendingCount() const { return state_->pending.size(); }
 

@@ -118,11 +118,11 @@ MapStatistics TsdfMap::statistics() const {
   return statistics;
 }
 
-TriangleMeshData TsdfMap::fullMesh() {
+TriangleMesh TsdfMap::fullMesh() {
   // Every block, whatever the update budget and the tolerance that lets
   // slightly changed blocks wait: a saved mesh is exactly the map's.
   extractor_.update(grid_, /*force_all=*/true);
-  TriangleMeshData mesh = extractor_.combined();
+  TriangleMesh mesh = extractor_.combined();
   for (const MeshChunk& chunk : dropped_chunks_) {
     const int offset = int(mesh.vertices.size());
     mesh.vertices.insert(mesh.vertices.end(), chunk.vertices.begin(), chunk.vertices.end());
@@ -133,8 +133,6 @@ TriangleMeshData TsdfMap::fullMesh() {
   }
   return mesh;
 }
-
-void TsdfMap::saveMesh(const std::string& path) { writeMeshPly(path, fullMesh()); }
 
 void TsdfMap::reset() {
   grid_.clear();

@@ -2,6 +2,7 @@
 // and the route's keep-out space every optional object must respect.
 #pragma once
 
+#include "range_image_mapping/simulation/mesh_primitives.h"
 #include "range_image_mapping/simulation/scene_generator.h"
 
 #include <Eigen/Geometry>

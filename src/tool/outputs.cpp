@@ -2,6 +2,7 @@
 
 #include "range_image_mapping/evaluation/report.h"
 #include "range_image_mapping/evaluation/surface_metrics.h"
+#include "range_image_mapping/io/mesh_file.h"
 
 #include <algorithm>
 #include <cmath>
@@ -157,7 +158,7 @@ void writeMeshAtomically(const std::string& path, const mapping::TriangleMeshDat
   if (!destination.parent_path().empty()) fs::create_directories(destination.parent_path());
   const fs::path partial = destination.parent_path() / (destination.stem().string() + ".partial.ply");
   try {
-    mapping::writeMeshPly(partial.string(), mesh);
+    io::saveMeshFile(partial.string(), mesh);
   } catch (...) {
     fs::remove(partial);
     throw;

@@ -4,8 +4,6 @@
 // definitions), on point samples of both surfaces.
 #pragma once
 
-#include "range_image_mapping/simulation/triangle_mesh.h"
-
 #include <Eigen/Core>
 
 #include <cstddef>
@@ -16,7 +14,7 @@
 
 namespace range_image_mapping::evaluation {
 
-// Meshes are sampled with simulation::sampleSurface: a grid of this spacing on
+// Meshes are sampled with range_image_mapping::sampleSurface: a grid of this spacing on
 // every triangle (area-weighted, no clumps or holes), offset by the seed.
 struct SurfaceSamplingOptions {
   double spacing_m = 0.0;  // for meshes, must be positive (rim eval mesh: a quarter of the threshold)

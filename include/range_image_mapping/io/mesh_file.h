@@ -1,8 +1,8 @@
-// Triangle mesh files: scenes the user brings (PLY or OBJ) and the ground
-// truth meshes the simulator writes (PLY).
+// Triangle mesh files: scenes the user brings (PLY or OBJ), the ground truth
+// meshes the simulator writes and the maps' meshes (PLY).
 #pragma once
 
-#include "range_image_mapping/simulation/triangle_mesh.h"
+#include "range_image_mapping/triangle_mesh.h"
 
 #include <stdexcept>
 #include <string>
@@ -22,11 +22,16 @@ class MeshFileError : public std::runtime_error {
 //        x, y, z, faces as "vertex_indices" lists of any integer types;
 //  .obj  "v x y z [w]" and "f" lines with "i", "i/t", "i//n" or "i/t/n"
 //        corners, negative (relative) indices; other statements are ignored.
-// Polygons become triangle fans. Rejects a mesh without triangles or with a
+// Polygons become triangle fans. Only positions and faces are read (no
+// normals or intensities). Rejects a mesh without triangles or with a
 // non-finite vertex.
-simulation::TriangleMesh loadMeshFile(const std::string& path);
+TriangleMesh loadMeshFile(const std::string& path);
 
-// Binary little-endian PLY (io::writePlyMesh); the path must end in .ply.
-void saveMeshFile(const std::string& path, const simulation::TriangleMesh& mesh);
+// Binary little-endian PLY (io::writePlyMesh) with normals when the mesh has
+// them and a float "intensity" per vertex when it has intensities; the path
+// must end in .ply. Throws std::invalid_argument for normals or intensities
+// that are not one per vertex or a triangle index out of range, and
+// io::PlyFormatError when the file cannot be written.
+void saveMeshFile(const std::string& path, const TriangleMesh& mesh);
 
 }  // namespace range_image_mapping::io

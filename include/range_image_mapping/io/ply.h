@@ -1,6 +1,9 @@
 // PLY files: binary little-endian point clouds with extra per-vertex
 // properties, triangle meshes, and reading vertex positions and faces back.
+// (io::saveMeshFile writes a TriangleMesh with its normals and intensities.)
 #pragma once
+
+#include "range_image_mapping/triangle_mesh.h"
 
 #include <Eigen/Core>
 
@@ -47,16 +50,14 @@ void writePlyMesh(const std::string& path, const std::vector<Eigen::Vector3f>& v
 // converted to float); other properties and elements are skipped.
 std::vector<Eigen::Vector3f> readPlyPoints(const std::string& path);
 
-struct PlyMesh {
-  std::vector<Eigen::Vector3f> vertices;
-  std::vector<Eigen::Vector3i> triangles;
-};
+// TODO(layers): remove once src/tool and src/ros use TriangleMesh
+using PlyMesh = TriangleMesh;
 
 // Vertex x, y, z and the "face" element's "vertex_indices" (or "vertex_index")
 // lists of an ASCII or binary little-endian PLY, any count and index types.
 // Polygons are split into triangle fans (exact for convex polygons). Throws
 // PlyFormatError naming the face for an index out of range or a face with
 // fewer than three corners.
-PlyMesh readPlyMesh(const std::string& path);
+TriangleMesh readPlyMesh(const std::string& path);
 
 }  // namespace range_image_mapping::io

@@ -11,13 +11,13 @@
 #pragma once
 
 #include "range_image_mapping/mapping/voxel_block_grid.h"
+#include "range_image_mapping/triangle_mesh.h"
 
 #include <Eigen/Core>
 
 #include <cstddef>
 #include <cstdint>
 #include <memory>
-#include <string>
 #include <vector>
 
 namespace range_image_mapping::mapping {
@@ -74,12 +74,8 @@ struct MeshChunk {
   std::vector<LatticeEdge> vertex_edges;   // each vertex's name, for welding chunks
 };
 
-struct TriangleMeshData {
-  std::vector<Eigen::Vector3f> vertices;
-  std::vector<Eigen::Vector3f> normals;
-  std::vector<float> intensities;  // empty or one per vertex
-  std::vector<Eigen::Vector3i> triangles;
-};
+// TODO(layers): remove once src/tool and src/ros use TriangleMesh
+using TriangleMeshData = TriangleMesh;
 
 // Meshes one block (cubes whose lower corner is in the block, reading the +1
 // neighbours for the far corners). Vertex normals are SDF gradients by
@@ -92,17 +88,13 @@ MeshChunk meshBlock(const VoxelBlockGrid& grid, const VoxelBlock& block, const M
 
 // The whole grid as one mesh, vertices welded across block borders too
 // (a closed surface has no boundary edges). Blocks are meshed in parallel;
-// the output order is deterministic (blocks sorted by key).
-TriangleMeshData extractMesh(const VoxelBlockGrid& grid, const MeshOptions& options = {});
+// the output order is deterministic (blocks sorted by key). Normals are one
+// per vertex, intensities too when the grid stores intensity (saved with
+// io::saveMeshFile).
+TriangleMesh extractMesh(const VoxelBlockGrid& grid, const MeshOptions& options = {});
 
 // Number of edges used by exactly one triangle: 0 for a watertight mesh.
 std::size_t countBoundaryEdges(const std::vector<Eigen::Vector3i>& triangles);
-
-// Binary PLY with normals (and "intensity" when present). Throws
-// std::invalid_argument for normals or intensities that are not one per
-// vertex, or a triangle index out of range; io::PlyFormatError when the file
-// cannot be written.
-void writeMeshPly(const std::string& path, const TriangleMeshData& mesh);
 
 struct MeshUpdate {
   std::vector<BlockKey> changed;  // chunks rebuilt (possibly now empty)
@@ -131,7 +123,7 @@ class MeshExtractor {
   std::vector<const MeshChunk*> chunks() const;
   std::size_t triangleCount() const;
   // All chunks as one mesh (vertices welded across chunk borders).
-  TriangleMeshData combined() const;
+  TriangleMesh combined() const;
   // Changed blocks waiting for an update (the budget left them out).
   std::size_t pendingCount() const;
   void clear();

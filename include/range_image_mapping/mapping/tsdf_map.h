@@ -22,8 +22,8 @@ struct TsdfMapOptions {
   // (0 = keep everything). Must exceed the integrator's max range.
   double memory_radius_m = 0.0;
   // Keep the mesh of dropped blocks (in memory, a small fraction of their
-  // voxels), so fullMesh() and saveMesh() cover the whole run. Off for runs
-  // that must stay at flat memory.
+  // voxels), so fullMesh() covers the whole run. Off for runs that must stay
+  // at flat memory.
   bool keep_dropped_mesh = true;
   // A pose this far (metres) from the last integrated one is refused as a
   // jump (0 = accept any); after max_refused_jumps refusals in a row the new
@@ -62,11 +62,9 @@ class TsdfMap {
   const TsdfMapOptions& options() const { return options_; }
   MapStatistics statistics() const;
   // The mesh of the whole run: the current grid's (updated first) plus the
-  // kept chunks of dropped blocks.
-  TriangleMeshData fullMesh();
+  // kept chunks of dropped blocks (saved with io::saveMeshFile).
+  TriangleMesh fullMesh();
   const std::vector<MeshChunk>& droppedChunks() const { return dropped_chunks_; }
-  // fullMesh() as a binary PLY.
-  void saveMesh(const std::string& path);
   void reset();
 
  private:

@@ -3,7 +3,7 @@
 // ray-triangle distance to a few float ulps.
 #pragma once
 
-#include "range_image_mapping/simulation/triangle_mesh.h"
+#include "range_image_mapping/triangle_mesh.h"
 
 #include <cstddef>
 #include <memory>

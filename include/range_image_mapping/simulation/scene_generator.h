@@ -1,7 +1,7 @@
 // Procedural scenes with a seed: the same seed gives the same scene.
 #pragma once
 
-#include "range_image_mapping/simulation/triangle_mesh.h"
+#include "range_image_mapping/triangle_mesh.h"
 
 #include <cstdint>
 #include <vector>

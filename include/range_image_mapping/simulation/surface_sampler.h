@@ -1,9 +1,10 @@
-// The ground-truth surface for reconstruction metrics: a mesh sampled densely,
-// restricted to what the sensor actually saw (so recall is not charged for
-// walls no ray ever reached). Written with io::writePlyPointCloud.
+// The ground-truth surface for reconstruction metrics: a mesh sampled densely
+// (range_image_mapping::sampleSurface), restricted to what the sensor actually
+// saw (so recall is not charged for walls no ray ever reached). Written with
+// io::writePlyPointCloud.
 #pragma once
 
-#include "range_image_mapping/simulation/triangle_mesh.h"
+#include "range_image_mapping/surface_sampling.h"
 
 #include <tsl/robin_map.h>
 
@@ -17,7 +18,7 @@ namespace range_image_mapping::simulation {
 // near the seen region when a voxel holding a hit lies within seen_distance of
 // it (voxel edge = seen_distance): every point within seen_distance of a hit is
 // near, and no point farther than (1 + sqrt 3) * seen_distance from every hit.
-class SeenRegion {
+class SeenRegion : public SurfaceRegion {
  public:
   // Throws std::invalid_argument for a distance that is not positive and finite.
   explicit SeenRegion(double seen_distance_m);
@@ -27,10 +28,12 @@ class SeenRegion {
   void addHit(const Eigen::Vector3f& point);
   void addHits(const std::vector<Eigen::Vector3f>& points);
 
-  bool isNear(const Eigen::Vector3f& point) const;
+  bool isNear(const Eigen::Vector3f& point) const override;
   // Cheap test for a whole patch: false when no hit lies within radius +
   // seen_distance of centre (true does not promise one does).
-  bool mayBeNear(const Eigen::Vector3f& centre, float radius) const;
+  bool mayBeNear(const Eigen::Vector3f& centre, float radius) const override;
+  // Tiles of a few seen distances: large unseen patches are skipped at once.
+  double tileEdge() const override;
 
   double seenDistance() const { return voxel_size_; }
   std::size_t voxelCount() const { return hits_per_voxel_.size(); }
@@ -57,18 +60,8 @@ class SeenRegion {
   VoxelHits hits_per_coarse_voxel_;
 };
 
-struct SurfaceSampleOptions {
-  // Distance between neighbouring samples: each triangle is sampled on a square
-  // grid of this step in its own plane, so the density is 1 / spacing^2 per m^2
-  // everywhere (area-weighted) without the clumps and holes of random sampling.
-  double spacing_m = 0.02;
-  uint32_t seed = 1;  // the grid's random offset per triangle (makes the count unbiased)
-};
-
-// Every sample of the mesh (no restriction). Deterministic for a seed, also
-// when run in parallel. Throws std::invalid_argument for a spacing that is not
-// positive and finite, or a triangle with a vertex index out of range.
-std::vector<Eigen::Vector3f> sampleSurface(const TriangleMesh& mesh, const SurfaceSampleOptions& options);
+// TODO(layers): remove once src/tool and src/ros use range_image_mapping::SurfaceSampleOptions
+using SurfaceSampleOptions = range_image_mapping::SurfaceSampleOptions;
 
 // The samples near the seen region only; the work grows with the seen area,
 // not the scene's.

@@ -1,23 +1,15 @@
-// Triangle meshes: the scenes the simulator casts rays into, and the ground
-// truth surfaces reconstructions are judged against.
+// Analytic triangle-mesh primitives the procedural scenes are built from and
+// tests use as exact ground truth.
 #pragma once
 
-#include <Eigen/Geometry>
+#include "range_image_mapping/triangle_mesh.h"
 
-#include <string>
-#include <vector>
+#include <Eigen/Core>
 
 namespace range_image_mapping::simulation {
 
-struct TriangleMesh {
-  std::vector<Eigen::Vector3f> vertices;
-  std::vector<Eigen::Vector3i> triangles;  // indices into vertices, counter-clockwise seen from outside
-
-  // Appends other's triangles, moved by pose.
-  void append(const TriangleMesh& other, const Eigen::Isometry3f& pose = Eigen::Isometry3f::Identity());
-  Eigen::AlignedBox3f bounds() const;
-  double area() const;
-};
+// TODO(layers): remove once src/tool and src/ros use TriangleMesh
+using TriangleMesh = range_image_mapping::TriangleMesh;
 
 // Analytic primitives (exact ground truth for tests). Bad sizes (not finite,
 // not positive, parallel edges, out-of-range counts) throw std::invalid_argument.

@@ -1,17 +1,19 @@
-// Little-endian scalars of binary files (KITTI .bin, PLY). The formats are
-// little-endian and so are the hosts we build for, so a copy is all it takes.
+// Little-endian scalars of packets and binary files (Ouster packets, KITTI
+// .bin, PLY). The formats are little-endian and so are the hosts we build for,
+// so a copy is all it takes (memcpy, never a cast: fields are not aligned).
+// Private to the library, shared with io (which sits above it).
 #pragma once
 
 #include <cstring>
 #include <string>
 
-namespace range_image_mapping::io {
+namespace range_image_mapping {
 
 static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__,
               "binary file io assumes a little-endian host");
 
 template <typename T>
-T readLittleEndian(const char* bytes) {
+T readLittleEndian(const void* bytes) {
   T value;
   std::memcpy(&value, bytes, sizeof(T));
   return value;
@@ -22,4 +24,4 @@ void appendLittleEndian(std::string& buffer, T value) {
   buffer.append(reinterpret_cast<const char*>(&value), sizeof(T));
 }
 
-}  // namespace range_image_mapping::io
+}  // namespace range_image_mapping

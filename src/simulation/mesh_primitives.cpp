@@ -1,4 +1,4 @@
-#include "range_image_mapping/simulation/triangle_mesh.h"
+#include "range_image_mapping/simulation/mesh_primitives.h"
 
 #include <cmath>
 #include <map>
@@ -69,32 +69,6 @@ class UnitIcosphere {
 };
 
 }  // namespace
-
-void TriangleMesh::append(const TriangleMesh& other, const Eigen::Isometry3f& pose) {
-  // No exact reserve here: scenes are built from thousands of small appends,
-  // and growing by exactly what each needs would copy the mesh every time.
-  const int first = static_cast<int>(vertices.size());
-  for (const Eigen::Vector3f& vertex : other.vertices) vertices.push_back(pose * vertex);
-  for (const Eigen::Vector3i& triangle : other.triangles)
-    triangles.push_back(triangle + Eigen::Vector3i::Constant(first));
-}
-
-Eigen::AlignedBox3f TriangleMesh::bounds() const {
-  Eigen::AlignedBox3f box;  // empty until extended
-  for (const Eigen::Vector3f& vertex : vertices) box.extend(vertex);
-  return box;
-}
-
-double TriangleMesh::area() const {
-  double total = 0.0;
-  for (const Eigen::Vector3i& t : triangles) {
-    const Eigen::Vector3d a = vertices.at(t[0]).cast<double>();
-    const Eigen::Vector3d b = vertices.at(t[1]).cast<double>();
-    const Eigen::Vector3d c = vertices.at(t[2]).cast<double>();
-    total += 0.5 * (b - a).cross(c - a).norm();
-  }
-  return total;
-}
 
 TriangleMesh makeQuad(const Eigen::Vector3f& corner, const Eigen::Vector3f& edge_u,
                       const Eigen::Vector3f& edge_v) {

@@ -1,6 +1,6 @@
 #include "range_image_mapping/ouster_packet.h"
 
-#include "../io/little_endian.h"
+#include "little_endian.h"
 
 #include <boost/crc.hpp>
 
@@ -11,12 +11,6 @@
 
 namespace range_image_mapping {
 namespace {
-
-// Packets are little-endian and pixels are not aligned: memcpy, never a cast.
-template <typename T>
-T readLittleEndian(const uint8_t* bytes) {
-  return io::readLittleEndian<T>(reinterpret_cast<const char*>(bytes));
-}
 
 constexpr std::size_t kPacketHeaderSize = 32;  // non-LEGACY profiles
 constexpr std::size_t kPacketFooterSize = 32;
