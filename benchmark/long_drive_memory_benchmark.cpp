@@ -22,7 +22,7 @@
 #include "machine_info.h"
 #include "simulated_mapping_sequence.h"
 
-#include "range_image_mapping/mapping/tsdf_map.h"
+#include "range_image_mapping/pipeline/scan_to_map_pipeline.h"
 #include "range_image_mapping/scan_motion.h"
 
 #include <malloc.h>
@@ -166,9 +166,17 @@ double statusMebibytes(const char* field) {
 // Heap bytes handed out and not freed, all arenas plus mmapped chunks: if RSS
 // grows while this stays flat, the allocator keeps freed pages (fragmentation),
 // not the program.
+// mallinfo2 is glibc >= 2.33; older glibc (Debian bullseye: 2.31) has only
+// mallinfo, whose int fields wrap past 2 GiB.
 double heapInUseMebibytes() {
+#if defined(__GLIBC__) && (__GLIBC__ > 2 || (__GLIBC__ == 2 && __GLIBC_MINOR__ >= 33))
   const struct mallinfo2 info = mallinfo2();
   return double(info.uordblks + info.hblkhd) / kMebibyte;
+#else
+  const struct mallinfo info = mallinfo();
+  return (double(static_cast<unsigned int>(info.uordblks)) + double(static_cast<unsigned int>(info.hblkhd))) /
+         kMebibyte;
+#endif
 }
 
 // What the mesh chunks hold (their arrays' capacity), the kept dropped
@@ -300,7 +308,12 @@ int run(int argc, char** argv) {
   map_options.integrator.max_range_m = preset.max_range_m;
   map_options.memory_radius_m = options.memory_radius_m;
   map_options.keep_dropped_mesh = options.keep_dropped_mesh;
-  mapping::TsdfMap map(map_options);
+  // The pipeline at the exact poses, meshing every mesh_every scans of scan time.
+  pipeline::PipelineOptions pipeline_options;
+  pipeline_options.map = map_options;
+  pipeline_options.mesh_period_s = options.mesh_every / kFrequencyHz;
+  pipeline::ScanToMapPipeline pipeline(pipeline_options);
+  const mapping::TsdfMap& map = *pipeline.map();
   const double setup_s = std::chrono::duration<double>(Clock::now() - setup_started).count();
 
   std::printf("outdoor_car, %d scans of %s (%d x %d) at 10 Hz = %.1f simulated minutes, on the fly in memory;\n"
@@ -334,7 +347,7 @@ int run(int argc, char** argv) {
     const double start = kStartS + frame / kFrequencyHz;
     simulator.simulate(*trajectory, start, uint32_t(frame), scan);
     // As simulateMappingSequence: the exact pose at column 0 and the sweep's true twist.
-    mapping::ScanPose pose;
+    pipeline::GivenPose pose;
     pose.world_from_lidar = scan.column_poses.front();
     const double sweep_s = simulator.columnTime(start, model->columns() - 1) - start;
     pose.twist = twistBetween(scan.column_poses.front(), scan.column_poses.back(), sweep_s);
@@ -343,11 +356,10 @@ int run(int argc, char** argv) {
     simulation_s += simulated_for;
     simulation_since_sample_s += simulated_for;
 
-    const mapping::MapUpdate update = map.integrate(scan.image, pose);
-    blocks_dropped += update.blocks_dropped;
-    if (!update.integrated && refused++ < 5)
-      std::fprintf(stderr, "scan %d: %s\n", frame, update.warning.c_str());
-    if ((frame + 1) % options.mesh_every == 0) map.updateMesh();
+    const pipeline::ScanResult result = pipeline.process(scan.image, pose);
+    if (result.map) blocks_dropped += result.map->blocks_dropped;
+    if (!(result.map && result.map->integrated) && refused++ < 5)
+      std::fprintf(stderr, "scan %d: %s\n", frame, result.warnings.empty() ? "" : result.warnings.front().c_str());
     const double mapped_for = std::chrono::duration<double>(Clock::now() - mapping_started).count();
     mapping_s += mapped_for;
     mapping_since_sample_s += mapped_for;

@@ -201,7 +201,7 @@ int runMap(const MapCommandOptions& options) {
                              std::to_string(warnings) + " warnings above)");
 
   const auto mesh_started = Clock::now();
-  const mapping::TriangleMeshData mesh = map.fullMesh();  // with the mesh of blocks the radius dropped
+  const TriangleMesh mesh = map.fullMesh();  // with the mesh of blocks the radius dropped
   times.mesh += secondsSince(mesh_started);
   const auto write_started = Clock::now();
   writeMeshAtomically(options.output, mesh);

@@ -153,7 +153,7 @@ std::string writeTrajectory(const std::string& kitti_path, const std::vector<io:
   return tum_path;
 }
 
-void writeMeshAtomically(const std::string& path, const mapping::TriangleMeshData& mesh) {
+void writeMeshAtomically(const std::string& path, const TriangleMesh& mesh) {
   const fs::path destination(path);
   if (!destination.parent_path().empty()) fs::create_directories(destination.parent_path());
   const fs::path partial = destination.parent_path() / (destination.stem().string() + ".partial.ply");

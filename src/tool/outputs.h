@@ -68,7 +68,7 @@ std::string writeTrajectory(const std::string& kitti_path, const std::vector<io:
 
 // Writes next to the destination and renames, so a failed run never leaves a
 // truncated mesh under the name asked for.
-void writeMeshAtomically(const std::string& path, const mapping::TriangleMeshData& mesh);
+void writeMeshAtomically(const std::string& path, const TriangleMesh& mesh);
 
 // A mesh file against a ground-truth surface at 3 voxels (the paper's
 // threshold), samples at a quarter of it: the JSON report and its summary line.

@@ -101,7 +101,7 @@ Eigen::Isometry3d poseAlignment(const std::vector<Eigen::Isometry3d>& estimate,
 // surface seen within the range clip.
 GroundTruthComparison compareWithGroundTruth(const io::Recording& recording,
                                              const std::vector<io::StampedPose>& estimate,
-                                             const mapping::TriangleMeshData& mesh, double voxel_m,
+                                             const TriangleMesh& mesh, double voxel_m,
                                              double range_m, const std::string& aligned_mesh_path) {
   GroundTruthComparison comparison;
   evaluation::StampedTrajectory estimated, truth;
@@ -116,7 +116,7 @@ GroundTruthComparison compareWithGroundTruth(const io::Recording& recording,
   const evaluation::AssociatedPoses associated = evaluation::associateByTimestamp(estimated, truth, 0.01);
   comparison.trajectory = evaluation::evaluateTrajectory(associated.estimate, associated.ground_truth);
   if (!recording.ground_truth.surface.empty() && !mesh.triangles.empty()) {
-    mapping::TriangleMeshData aligned = mesh;
+    TriangleMesh aligned = mesh;
     const Eigen::Isometry3f alignment = poseAlignment(associated.estimate, associated.ground_truth).cast<float>();
     for (Eigen::Vector3f& vertex : aligned.vertices) vertex = alignment * vertex;
     for (Eigen::Vector3f& normal : aligned.normals) normal = alignment.linear() * normal;
@@ -324,7 +324,7 @@ int runPipeline(RunCommandOptions options, const Command& command) {
 
   mapping::TsdfMap& map = *pipeline.map();
   const auto mesh_started = Clock::now();
-  const mapping::TriangleMeshData mesh = map.fullMesh();
+  const TriangleMesh mesh = map.fullMesh();
   run.mesh_seconds += secondsSince(mesh_started);
   const mapping::MapStatistics statistics = map.statistics();
   Json::Value report;

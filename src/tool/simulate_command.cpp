@@ -331,7 +331,7 @@ int runSimulate(SimulateOptions options) {
     io::writeTumPoses((out / "poses_sensor_tum.txt").string(), sensor_poses, sensor_info);
   }
   io::saveMeshFile((out / "scene.ply").string(), scene.mesh);
-  simulation::SurfaceSampleOptions sampling;
+  SurfaceSampleOptions sampling;
   sampling.spacing_m = options.surface_spacing_m;
   sampling.seed = options.seed;
   const std::vector<Eigen::Vector3f> surface = simulation::sampleSeenSurface(scene.mesh, seen, sampling);

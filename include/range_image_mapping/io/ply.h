@@ -50,9 +50,6 @@ void writePlyMesh(const std::string& path, const std::vector<Eigen::Vector3f>& v
 // converted to float); other properties and elements are skipped.
 std::vector<Eigen::Vector3f> readPlyPoints(const std::string& path);
 
-// TODO(layers): remove once src/tool and src/ros use TriangleMesh
-using PlyMesh = TriangleMesh;
-
 // Vertex x, y, z and the "face" element's "vertex_indices" (or "vertex_index")
 // lists of an ASCII or binary little-endian PLY, any count and index types.
 // Polygons are split into triangle fans (exact for convex polygons). Throws

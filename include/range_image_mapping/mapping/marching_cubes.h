@@ -74,9 +74,6 @@ struct MeshChunk {
   std::vector<LatticeEdge> vertex_edges;   // each vertex's name, for welding chunks
 };
 
-// TODO(layers): remove once src/tool and src/ros use TriangleMesh
-using TriangleMeshData = TriangleMesh;
-
 // Meshes one block (cubes whose lower corner is in the block, reading the +1
 // neighbours for the far corners). Vertex normals are SDF gradients by
 // central differences, one-sided where a neighbour is unobserved or lies

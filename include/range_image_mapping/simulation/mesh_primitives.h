@@ -8,9 +8,6 @@
 
 namespace range_image_mapping::simulation {
 
-// TODO(layers): remove once src/tool and src/ros use TriangleMesh
-using TriangleMesh = range_image_mapping::TriangleMesh;
-
 // Analytic primitives (exact ground truth for tests). Bad sizes (not finite,
 // not positive, parallel edges, out-of-range counts) throw std::invalid_argument.
 // Quad corner, corner + u, corner + u + v, corner + v: its outside faces u x v.

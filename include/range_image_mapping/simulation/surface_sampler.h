@@ -60,9 +60,6 @@ class SeenRegion : public SurfaceRegion {
   VoxelHits hits_per_coarse_voxel_;
 };
 
-// TODO(layers): remove once src/tool and src/ros use range_image_mapping::SurfaceSampleOptions
-using SurfaceSampleOptions = range_image_mapping::SurfaceSampleOptions;
-
 // The samples near the seen region only; the work grows with the seen area,
 // not the scene's.
 std::vector<Eigen::Vector3f> sampleSeenSurface(const TriangleMesh& mesh, const SeenRegion& seen,
