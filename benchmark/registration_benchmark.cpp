@@ -58,7 +58,7 @@ void printError(const char* name, const Timing& timing, const Eigen::Isometry3d&
               Eigen::AngleAxisd(error.linear()).angle() * 180.0 / M_PI);
 }
 
-pcl::PointCloud<pcl::PointNormal>::Ptr pclCloud(const registration::VertexNormalMap& map) {
+pcl::PointCloud<pcl::PointNormal>::Ptr pclCloud(const VertexNormalMap& map) {
   pcl::PointCloud<pcl::PointNormal>::Ptr cloud(new pcl::PointCloud<pcl::PointNormal>);
   for (std::size_t i = 0; i < map.points.size(); ++i) {
     if (!std::isfinite(map.normals[i].x())) continue;
@@ -98,14 +98,14 @@ int run() {
               frames[1].frame_id, frames[0].rows(), frames[0].columns(), kThreads);
 
   // Where the time goes: normals of one frame, the target pyramid, ICP alone.
-  registration::VertexNormalMap scratch;
+  VertexNormalMap scratch;
   const Timing normals = measure(20, [&] {
     computeVertexNormalMap(frames[1], 1, {}, scratch);
     return Eigen::Isometry3d::Identity();
   });
   std::printf("%-28s %9.2f ms\n", "normal map (full, cross)", normals.median_ms);
-  registration::NormalMapOptions covariance_options;
-  covariance_options.method = registration::NormalMethod::kCovariance;
+  NormalMapOptions covariance_options;
+  covariance_options.method = NormalMethod::kCovariance;
   const Timing covariance = measure(10, [&] {
     computeVertexNormalMap(frames[1], 1, covariance_options, scratch);
     return Eigen::Isometry3d::Identity();
@@ -136,7 +136,7 @@ int run() {
   printError("projective single-scale", single, truth);
 
   // PCL gets our normals (their computation is not part of its time).
-  registration::VertexNormalMap target_map, source_map;
+  VertexNormalMap target_map, source_map;
   computeVertexNormalMap(frames[0], 1, {}, target_map);
   computeVertexNormalMap(frames[1], 1, {}, source_map);
   const auto target_cloud = pclCloud(target_map), source_cloud = pclCloud(source_map);

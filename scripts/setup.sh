@@ -2,8 +2,10 @@
 # One-command set-up for a fresh Debian bookworm machine, as root.
 #   scripts/setup.sh demo   install, build, run the main job
 #   scripts/setup.sh test   install, build, run every test (unit, rostest, fuzzers)
+# Also Debian bullseye (the Noetic-era toolchain; scripts/check_noetic_toolchain.sh).
 # Environment: RIM_DATA_DIR (default: ../shared/data next to the repository),
-#              RIM_FUZZ_SECONDS (default 60 per fuzzer), RIM_SKIP_INSTALL=1.
+#              RIM_FUZZ_SECONDS (default 60 per fuzzer), RIM_SKIP_INSTALL=1,
+#              RIM_BENCHMARKS=0 (no benchmark programs, nor the packages only they need).
 set -euo pipefail
 
 mode=${1:-}
@@ -18,13 +20,17 @@ export PATH="/usr/bin:/bin:/usr/sbin:/sbin:$PATH"
 packages=(
   build-essential cmake pkg-config git
   catkin ros-core-dev rosbash python3-roslaunch python3-rostest python3-rosbag rviz
+  python3-nav-msgs python3-geometry-msgs  # rostopic echo of odometry (check_install_space.sh)
   libnodeletlib-dev libnodeletlib-tools libnodelet-dev pluginlib-dev libtopic-tools-dev
   libtf2-ros-dev libtf2-eigen-dev libsensor-msgs-dev libnav-msgs-dev libvisualization-msgs-dev
-  librostest-dev libgtest-dev libbenchmark-dev
+  librostest-dev libgtest-dev
   libeigen3-dev libtbb-dev libjsoncpp-dev libpcap-dev libboost-program-options-dev libpng-dev libssl-dev
-  libnanoflann-dev libembree-dev robin-map-dev gnuplot-nox libpcl-dev clang liboctomap-dev
+  libnanoflann-dev libembree-dev robin-map-dev gnuplot-nox clang liboctomap-dev
   libstd-srvs-dev libdiagnostic-updater-dev libmessage-filters-dev libboost-dev
 )
+# Only the benchmark programs need these (PCL: the ICP/GICP baselines).
+benchmarks=${RIM_BENCHMARKS:-1}
+[ "$benchmarks" = 0 ] || packages+=(libbenchmark-dev libpcl-dev)
 
 install_dependencies() {
   [ "${RIM_SKIP_INSTALL:-0}" = 1 ] && return
@@ -36,6 +42,18 @@ install_dependencies() {
   [ ${#missing[@]} -eq 0 ] && return
   echo "== installing ${#missing[@]} Debian packages"
   apt-get update -qq
+  # One message naming every package this Debian release lacks, not apt's first.
+  local unavailable=()
+  for package in "${missing[@]}"; do
+    local candidate
+    candidate=$(apt-cache policy "$package" 2>/dev/null | awk '/Candidate:/ {print $2}')
+    [ -n "$candidate" ] && [ "$candidate" != "(none)" ] || unavailable+=("$package")
+  done
+  if [ ${#unavailable[@]} -gt 0 ]; then
+    echo "not available on this Debian release ($(. /etc/os-release && echo "$VERSION_CODENAME")):" \
+      "${unavailable[*]}" >&2
+    exit 1
+  fi
   DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 }
 
@@ -43,8 +61,14 @@ build() {
   echo "== building in $workspace"
   mkdir -p "$workspace/src"
   ln -sfn "$repository" "$workspace/src/range_image_mapping"
+  # Test binaries are built by catkin's `tests` target (as catkin_add_gtest's are).
+  local targets=(all)
+  [ "$mode" = test ] && targets+=(tests)
+  local benchmark_option=ON
+  [ "$benchmarks" = 0 ] && benchmark_option=OFF
   if ! (cd "$workspace" && catkin_make -DPYTHON_EXECUTABLE=/usr/bin/python3 \
-    -DCMAKE_BUILD_TYPE=Release -j2 >"$workspace/build.log" 2>&1); then
+    -DCMAKE_BUILD_TYPE=Release -DRIM_BENCHMARKS=$benchmark_option -j2 "${targets[@]}" \
+    >"$workspace/build.log" 2>&1); then
     tail -n 60 "$workspace/build.log"
     echo "build failed; the whole log is $workspace/build.log" >&2
     exit 1

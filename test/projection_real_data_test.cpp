@@ -126,7 +126,10 @@ struct PointSet {
   template <class Box>
   bool kdtree_get_bbox(Box&) const { return false; }
 };
-using MapTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, PointSet>, PointSet, 3>;
+// The index type is given, not defaulted (nanoflann 1.3: size_t, 1.4: uint32_t).
+using MapTreeIndex = uint32_t;
+using MapTree =
+    nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, PointSet>, PointSet, 3, MapTreeIndex>;
 
 TEST(RealCaptureGeometry, LbN3ScansLandOnTheReferenceMap) {
   RIM_REQUIRE_DATA(pcap, "ouster-pcaps/OS-1-128_v2.3.0_1024x10_lb_n3.pcap");
@@ -149,7 +152,7 @@ TEST(RealCaptureGeometry, LbN3ScansLandOnTheReferenceMap) {
     std::vector<float> distances;
     for (const Eigen::Vector3f& point : images[frame].unprojectAll()) {
       const Eigen::Vector3f in_map = map_from_lidar * point;
-      uint32_t index;
+      MapTreeIndex index;
       float squared;
       tree.knnSearch(in_map.data(), 1, &index, &squared);
       distances.push_back(std::sqrt(squared));

@@ -29,8 +29,12 @@ struct PointSetAdaptor {
     return false;  // let nanoflann compute it
   }
 };
+// The tree's index type is given, not defaulted: nanoflann 1.3 (Debian
+// bullseye) defaults it to size_t, 1.4 to uint32_t, and knnSearch takes a
+// pointer to it.
+using KdTreeIndex = uint32_t;
 using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, PointSetAdaptor>,
-                                                   PointSetAdaptor, 3>;
+                                                   PointSetAdaptor, 3, KdTreeIndex>;
 
 std::string lowerCaseExtension(const std::string& path) {
   std::string extension = std::filesystem::path(path).extension().string();
@@ -135,14 +139,17 @@ SurfaceSample loadSurfaceSample(const std::string& path, const SurfaceSamplingOp
 std::vector<float> nearestDistances(const std::vector<Eigen::Vector3f>& queries,
                                     const std::vector<Eigen::Vector3f>& reference) {
   if (reference.empty()) throw std::invalid_argument("nearestDistances: the reference set is empty");
-  if (reference.size() >= std::numeric_limits<uint32_t>::max())
+  if (reference.size() >= std::numeric_limits<KdTreeIndex>::max())
     throw std::invalid_argument("nearestDistances: more than 2^32 reference points");
   const PointSetAdaptor adaptor{reference};
-  const KdTree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  KdTree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+#if NANOFLANN_VERSION < 0x140
+  tree.buildIndex();  // nanoflann 1.4 builds it in the constructor, 1.3 (bullseye) does not
+#endif
   std::vector<float> distances(queries.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, queries.size(), 4096),
                     [&](const tbb::blocked_range<std::size_t>& range) {
-                      uint32_t index = 0;
+                      KdTreeIndex index = 0;
                       float squared = 0;
                       for (std::size_t i = range.begin(); i != range.end(); ++i) {
                         tree.knnSearch(queries[i].data(), 1, &index, &squared);
