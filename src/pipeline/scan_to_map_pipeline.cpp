@@ -68,7 +68,7 @@ ScanResult ScanToMapPipeline::process(const RangeImage& scan, bool source_starte
     const double seconds = update.seconds;
     update = odometry_->process(scan, result.scan_time_ns);
     update.seconds += seconds;
-    update.warning = "the source started over and this scan is older than the last: odometry restarted at the identity";
+    update.warning = "a scan older than the last after the source started over: odometry restarted at the identity";
     result.restart = Restart::kSourceStartedOver;
   }
   result.odometry_seconds = update.seconds;

@@ -182,7 +182,9 @@ void OdometryNodelet::onRangeImage(const LidarRangeImage::ConstPtr& message) {
     if (!last_ros_time_.isZero() && now < last_ros_time_) ros_time_jumped_back_ = true;
     last_ros_time_ = now;
     const pipeline::ScanResult result = pipeline_->process(image, ros_time_jumped_back_);
-    const registration::OdometryUpdate& update = *result.odometry;
+    registration::OdometryUpdate update = *result.odometry;
+    if (result.restart == pipeline::Restart::kSourceStartedOver)
+      update.warning = "ROS time jumped back (a bag loop or a restarted replay); " + update.warning;
     if (result.restart == pipeline::Restart::kSourceStartedOver || message->header.stamp <= now)
       ros_time_jumped_back_ = false;
     ++statistics_.frames;
