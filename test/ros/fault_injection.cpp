@@ -26,6 +26,7 @@
 #include "range_image_mapping/ouster_packet.h"
 #include "range_image_mapping/ros/bag_writer.h"
 
+#include "finite_odometry.h"
 #include "rostest_main.h"
 #include "spin_until.h"
 
@@ -124,17 +125,6 @@ std::string changedMetadata(const std::string& json, const std::string& from, co
 
 // ------------------------------------------------------------ what the pipeline says
 
-bool finite(const nav_msgs::Odometry& odometry) {
-  const auto& p = odometry.pose.pose;
-  const auto& t = odometry.twist.twist;
-  bool ok = std::isfinite(p.position.x) && std::isfinite(p.position.y) && std::isfinite(p.position.z) &&
-            std::isfinite(p.orientation.x) && std::isfinite(p.orientation.y) && std::isfinite(p.orientation.z) &&
-            std::isfinite(p.orientation.w) && std::isfinite(t.linear.x) && std::isfinite(t.linear.y) &&
-            std::isfinite(t.linear.z) && std::isfinite(t.angular.x) && std::isfinite(t.angular.y) &&
-            std::isfinite(t.angular.z);
-  for (double c : odometry.pose.covariance) ok = ok && std::isfinite(c);
-  return ok;
-}
 
 struct Outputs {
   std::vector<LidarRangeImage::ConstPtr> images, cloud_images;
@@ -197,12 +187,12 @@ class FaultInjectionTest : public testing::Test {
     subscribers_.push_back(node_.subscribe<nav_msgs::Odometry>(
         "/odometry", 64, [this](const nav_msgs::Odometry::ConstPtr& odometry) {
           outputs_.odometry.push_back(odometry);
-          outputs_.non_finite_odometry += !finite(*odometry);
+          outputs_.non_finite_odometry += !test::isFinite(*odometry);
         }));
     subscribers_.push_back(node_.subscribe<nav_msgs::Odometry>(
         "/cloud/odometry", 64, [this](const nav_msgs::Odometry::ConstPtr& odometry) {
           outputs_.cloud_odometry.push_back(odometry);
-          outputs_.non_finite_odometry += !finite(*odometry);
+          outputs_.non_finite_odometry += !test::isFinite(*odometry);
         }));
     subscribers_.push_back(node_.subscribe<rosgraph_msgs::Log>("/rosout", 1000, [this](const rosgraph_msgs::Log::ConstPtr& log) {
       if (log->name == "/rim_manager") outputs_.log.push_back(std::to_string(int(log->level)) + " " + log->msg);

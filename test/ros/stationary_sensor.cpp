@@ -16,6 +16,7 @@
 // test.
 #include "range_image_mapping/SaveMesh.h"
 
+#include "finite_odometry.h"
 #include "rostest_main.h"
 #include "spin_until.h"
 
@@ -91,19 +92,6 @@ bool finite(const geometry_msgs::Transform& t) {
          std::isfinite(t.rotation.w);
 }
 
-// Every number of the message: pose, twist and both covariances.
-bool finite(const nav_msgs::Odometry& odometry) {
-  const geometry_msgs::Pose& p = odometry.pose.pose;
-  const geometry_msgs::Twist& t = odometry.twist.twist;
-  bool ok = std::isfinite(p.position.x) && std::isfinite(p.position.y) && std::isfinite(p.position.z) &&
-            std::isfinite(p.orientation.x) && std::isfinite(p.orientation.y) && std::isfinite(p.orientation.z) &&
-            std::isfinite(p.orientation.w) && std::isfinite(t.linear.x) && std::isfinite(t.linear.y) &&
-            std::isfinite(t.linear.z) && std::isfinite(t.angular.x) && std::isfinite(t.angular.y) &&
-            std::isfinite(t.angular.z);
-  for (double c : odometry.pose.covariance) ok = ok && std::isfinite(c);
-  for (double c : odometry.twist.covariance) ok = ok && std::isfinite(c);
-  return ok;
-}
 
 // The message's quaternion as it is (not normalised, so a wrong norm shows).
 Eigen::Quaterniond rawQuaternion(const geometry_msgs::Quaternion& q) { return Eigen::Quaterniond(q.w, q.x, q.y, q.z); }
@@ -212,7 +200,7 @@ TEST(StationarySensor, NoNonFiniteValueNoJumpNoDrift) {
   for (const auto& message : odometry) {
     EXPECT_EQ(message->header.frame_id, settings.odom_frame);
     EXPECT_EQ(message->child_frame_id, settings.base_frame);
-    if (!finite(*message)) {
+    if (!test::isFinite(*message)) {
       ++non_finite;
       continue;
     }
