@@ -47,13 +47,23 @@ void validateEffects(const SensorEffects& effects) {
 struct LidarSimulator::ColumnBuffers {
   std::vector<Eigen::Vector3f> origins, directions, normals;
   std::vector<float> distances;
+  std::vector<int> actors;  // per ray: the actor hit, -1 for the scene or nothing
+  ActorSnapshot snapshot;   // the actors at the column's time
   void resize(std::size_t rays) {
     origins.resize(rays);
     directions.resize(rays);
     normals.resize(rays);
     distances.resize(rays);
+    actors.resize(rays);
   }
 };
+
+void LidarSimulator::setActors(const std::vector<MovingActor>* actors) {
+  if (actors && actors->size() >= 65535)
+    throw std::invalid_argument("LidarSimulator: at most 65534 actors (16-bit labels), got " +
+                                std::to_string(actors->size()));
+  actors_ = actors && !actors->empty() ? actors : nullptr;
+}
 
 LidarSimulator::LidarSimulator(LidarModelConstPtr model, const RayCaster& caster,
                                SensorEffects effects, uint32_t seed, double frequency_hz)
@@ -117,6 +127,7 @@ void LidarSimulator::simulate(const Trajectory& trajectory, double start_time_s,
   scan.start_time_s = start_time_s;
   scan.column_poses.resize(columns_);
   scan.true_range.resize(pixels);
+  scan.true_actor.resize(pixels);
   const Eigen::Isometry3d start_pose =
       effects_.motion_distortion ? Eigen::Isometry3d::Identity() : trajectory.pose(start_time_s);
 
@@ -173,6 +184,9 @@ void LidarSimulator::simulateColumn(int u, const Eigen::Isometry3d& pose, uint32
                                            beam_origin_norm_);
     caster_.cast(buffers.origins.data(), buffers.directions.data(), rows_ * sub_rays, 0.0f,
                  std::max(reach, 0.0f), buffers.distances.data(), buffers.normals.data());
+    std::fill(buffers.actors.begin(), buffers.actors.end(), -1);
+    if (actors_) castActors(effects_.motion_distortion ? time_s : scan.start_time_s, std::max(reach, 0.0f),
+                            buffers);
   }
 
   SeededRandom random({seed_, frame_id, static_cast<uint64_t>(u)});
@@ -186,14 +200,17 @@ void LidarSimulator::simulateColumn(int u, const Eigen::Isometry3d& pose, uint32
     raw.signal[pixel] = 0;
     raw.near_ir[pixel] = 0;
     scan.true_range[pixel] = std::numeric_limits<float>::quiet_NaN();
+    scan.true_actor[pixel] = 0;
     if (!in_window) continue;
     // Drawn for every pixel, hit or not: one pixel's draws never shift another's.
     const double noise = noisy ? effects_.range_noise_sigma_m * random.gaussian() : 0.0;
     const bool dropped = dropping && random.uniform() < effects_.dropout_probability;
 
     const std::size_t first_ray = v * sub_rays;
-    if (!std::isnan(buffers.distances[first_ray]))
+    if (!std::isnan(buffers.distances[first_ray])) {
       scan.true_range[pixel] = static_cast<float>(n + buffers.distances[first_ray]);
+      scan.true_actor[pixel] = static_cast<uint16_t>(buffers.actors[first_ray] + 1);
+    }
     std::size_t nearest = first_ray;
     for (std::size_t k = 1; k < sub_rays; ++k) {
       const float distance = buffers.distances[first_ray + k];
@@ -212,6 +229,24 @@ void LidarSimulator::simulateColumn(int u, const Eigen::Isometry3d& pose, uint32
     raw.reflectivity[pixel] = static_cast<uint8_t>(reflectivity);
     const double signal = reflectivity * kSignalAtOneMetre / (measured * measured);
     raw.signal[pixel] = static_cast<uint16_t>(std::clamp(signal + 0.5, 1.0, 65535.0));
+  }
+}
+
+// The actors at the column's time against every ray of the column: an actor
+// nearer than the scene's hit replaces it (distance and normal), exactly as a
+// mesh of the boxes in the same Embree scene would, without rebuilding one
+// per column.
+void LidarSimulator::castActors(double time_s, float reach_m, ColumnBuffers& buffers) const {
+  buffers.snapshot.reset(*actors_, time_s);
+  for (std::size_t ray = 0; ray < buffers.distances.size(); ++ray) {
+    const float scene_distance = buffers.distances[ray];
+    const double far = std::isnan(scene_distance) ? reach_m : scene_distance;
+    const ActorHit hit = buffers.snapshot.intersect(buffers.origins[ray].cast<double>(),
+                                                    buffers.directions[ray].cast<double>(), 0.0, far);
+    if (hit.actor < 0) continue;
+    buffers.distances[ray] = static_cast<float>(hit.distance_m);
+    buffers.normals[ray] = hit.normal_world.cast<float>();
+    buffers.actors[ray] = hit.actor;
   }
 }
 

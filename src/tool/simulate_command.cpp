@@ -3,16 +3,19 @@
 #include "commands.h"
 #include "progress.h"
 
+#include "range_image_mapping/io/actor_tracks.h"
 #include "range_image_mapping/io/kitti.h"
 #include "range_image_mapping/io/mesh_file.h"
 #include "range_image_mapping/io/pcap_writer.h"
 #include "range_image_mapping/io/ply.h"
+#include "range_image_mapping/io/png.h"
 #include "range_image_mapping/io/pose_file.h"
 #include "range_image_mapping/ouster_packet_encoder.h"
 #include "range_image_mapping/simulation/lidar_simulator.h"
 #include "range_image_mapping/simulation/scene_generator.h"
 #include "range_image_mapping/simulation/sensor_presets.h"
 #include "range_image_mapping/simulation/surface_sampler.h"
+#include "range_image_mapping/simulation/traffic.h"
 #ifdef RIM_WITH_ROSBAG
 #include "range_image_mapping/ros/bag_writer.h"
 #endif
@@ -39,18 +42,22 @@ using simulation::SceneKind;
 
 struct Preset {
   const char* name;
-  SceneKind scene;
+  const char* scene;   // indoor, outdoor or traffic
   const char* sensor;  // OS-0-128, OS-1-128 or hdl64
-  MotionProfile motion;
+  const char* motion;  // car, cart, handheld or traffic
   int frames;
   const char* formats;
 };
 
+// traffic: stop-and-go between two trucks, with moving actors (their tracks in
+// actors.txt, per-pixel labels in labels/).
 const Preset kPresets[] = {
-    {"outdoor_car", SceneKind::kOutdoor, "OS-1-128", MotionProfile::kCar, 300, "pcap"},
-    {"indoor_cart", SceneKind::kIndoor, "OS-0-128", MotionProfile::kCart, 300, "pcap"},
-    {"handheld_fast", SceneKind::kIndoor, "OS-0-128", MotionProfile::kHandheld, 150, "pcap"},
-    {"kitti_like", SceneKind::kOutdoor, "hdl64", MotionProfile::kCar, 300, "kitti"},
+    {"outdoor_car", "outdoor", "OS-1-128", "car", 300, "pcap"},
+    {"indoor_cart", "indoor", "OS-0-128", "cart", 300, "pcap"},
+    {"handheld_fast", "indoor", "OS-0-128", "handheld", 150, "pcap"},
+    {"kitti_like", "outdoor", "hdl64", "car", 300, "kitti"},
+    {"traffic", "traffic", "OS-1-128", "traffic", 300, "pcap"},
+    {"traffic_hdl64", "traffic", "hdl64", "traffic", 300, "kitti"},
 };
 
 // The real sensors' metadata in the shared data folder are the defaults; the
@@ -72,8 +79,9 @@ struct SimulateOptions {
   int frames = 0;  // 0: the preset's
   uint32_t seed = 1;
   std::string sensor;   // metadata JSON, OS-0-128, OS-1-128 or hdl64 (default: the preset's)
-  std::string scene;    // indoor, outdoor or a PLY/OBJ mesh (default: the preset's)
-  std::string motion;   // car, cart, handheld or a pose file (default: the preset's)
+  std::string scene;    // indoor, outdoor, traffic or a PLY/OBJ mesh (default: the preset's)
+  std::string motion;   // car, cart, handheld, traffic or a pose file (default: the preset's)
+  bool no_actors = false;  // the traffic scene without its moving actors
   std::string formats;  // comma-separated: pcap, bag, points-bag, kitti (default: the preset's)
   std::string profile = "RNG19_RFL8_SIG16_NIR16";
   std::string cloud_layout = "organized";
@@ -176,11 +184,8 @@ int runSimulate(SimulateOptions options) {
     throw std::invalid_argument("give --preset, or all of --sensor, --scene and --motion");
   if (preset) {
     if (options.sensor.empty()) options.sensor = preset->sensor;
-    if (options.motion.empty())
-      options.motion = preset->motion == MotionProfile::kCar    ? "car"
-                       : preset->motion == MotionProfile::kCart ? "cart"
-                                                                : "handheld";
-    if (options.scene.empty()) options.scene = preset->scene == SceneKind::kIndoor ? "indoor" : "outdoor";
+    if (options.motion.empty()) options.motion = preset->motion;
+    if (options.scene.empty()) options.scene = preset->scene;
     if (options.frames == 0) options.frames = preset->frames;
     if (options.formats.empty()) options.formats = preset->formats;
   }
@@ -194,8 +199,20 @@ int runSimulate(SimulateOptions options) {
   std::filesystem::create_directories(out);
 
   // Scene and motion.
+  const double frequency = sensor.ouster ? sensor.ouster->frequency_hz : 10.0;
+  const double end_time = options.start_time_s + (options.frames + 1) / frequency;
   simulation::Scene scene;
-  if (options.scene == "indoor" || options.scene == "outdoor") {
+  simulation::TrafficScenario traffic;
+  if (options.motion == "traffic" && options.scene != "traffic")
+    throw std::invalid_argument("--motion traffic is the traffic scene's own stop-and-go drive; give --scene traffic");
+  if (options.scene == "traffic") {
+    simulation::TrafficOptions traffic_options;
+    traffic_options.seed = options.seed;
+    traffic_options.duration_s = end_time + 0.5;
+    traffic = simulation::makeTrafficScenario(traffic_options);
+    scene = std::move(traffic.scene);
+    if (options.no_actors) traffic.actors.clear();
+  } else if (options.scene == "indoor" || options.scene == "outdoor") {
     simulation::SceneOptions scene_options;
     scene_options.kind = options.scene == "indoor" ? SceneKind::kIndoor : SceneKind::kOutdoor;
     scene_options.seed = options.seed;
@@ -203,10 +220,10 @@ int runSimulate(SimulateOptions options) {
   } else {
     scene.mesh = io::loadMeshFile(options.scene);
   }
-  const double frequency = sensor.ouster ? sensor.ouster->frequency_hz : 10.0;
-  const double end_time = options.start_time_s + (options.frames + 1) / frequency;
   std::unique_ptr<simulation::Trajectory> trajectory;
-  if (options.motion == "car" || options.motion == "cart" || options.motion == "handheld") {
+  if (options.motion == "traffic") {
+    trajectory = std::move(traffic.ego);
+  } else if (options.motion == "car" || options.motion == "cart" || options.motion == "handheld") {
     if (scene.route.size() < 3)
       throw std::invalid_argument("--motion " + options.motion +
                                   " follows a generated scene's route; with a mesh file, give a pose file");
@@ -235,7 +252,9 @@ int runSimulate(SimulateOptions options) {
   effects.motion_distortion = !options.no_motion_distortion;
   if (options.surface_spacing_m <= 0.0) options.surface_spacing_m = options.scene == "indoor" ? 0.02 : 0.075;
   const simulation::RayCaster caster(scene.mesh);
-  const simulation::LidarSimulator simulator(sensor.model, caster, effects, options.seed, frequency);
+  simulation::LidarSimulator simulator(sensor.model, caster, effects, options.seed, frequency);
+  const std::vector<simulation::MovingActor>& actors = traffic.actors;
+  simulator.setActors(&actors);
 
   // Outputs.
   std::unique_ptr<io::OusterPcapWriter> pcap;
@@ -259,6 +278,18 @@ int runSimulate(SimulateOptions options) {
                                                                      : CloudLayout::kOrganized;
 #endif
   if (formats.count("kitti")) std::filesystem::create_directories(out / "velodyne");
+  // Moving actors' ground truth: their poses per scan and per-pixel labels.
+  std::vector<io::ActorTrack> tracks;
+  for (std::size_t k = 0; k < actors.size(); ++k) {
+    io::ActorTrack track;
+    track.label = static_cast<int>(k + 1);
+    track.kind = simulation::toString(actors[k].kind);
+    track.name = actors[k].name;
+    for (const simulation::ActorBox& box : actors[k].boxes) track.boxes.push_back({box.centre_m, box.half_size_m});
+    tracks.push_back(std::move(track));
+  }
+  if (!actors.empty()) std::filesystem::create_directories(out / "labels");
+  std::size_t returns = 0, actor_returns = 0, truck_returns = 0;
   io::PoseFileInfo pose_info;
   pose_info.frame = sensor.frame;
   pose_info.comment = "rim simulate, seed " + std::to_string(options.seed) + ", pose at each scan's first column";
@@ -281,12 +312,32 @@ int runSimulate(SimulateOptions options) {
     column_times.write(scan.raw.timestamp_ns);
     // Noise-free hits, in the world: what the sensor saw.
     const LidarModel& model = *sensor.model;
+    // Hits on moving actors are not seen surface: the ground truth is the static world.
     for (int v = 0; v < model.rows(); ++v)
       for (int u = 0; u < model.columns(); ++u) {
-        const float range = scan.true_range[static_cast<std::size_t>(v) * model.columns() + u];
-        if (std::isfinite(range) && !(options.surface_max_range_m > 0.0 && range > options.surface_max_range_m))
+        const std::size_t pixel = static_cast<std::size_t>(v) * model.columns() + u;
+        const float range = scan.true_range[pixel];
+        if (std::isfinite(range) && scan.true_actor[pixel] == 0 &&
+            !(options.surface_max_range_m > 0.0 && range > options.surface_max_range_m))
           seen.addHit((scan.column_poses[u] * model.unproject(u, v, range).cast<double>()).cast<float>());
       }
+    if (!actors.empty()) {
+      char name[32];
+      std::snprintf(name, sizeof name, "%06d.png", frame);
+      io::writeGrey16Png((out / "labels" / name).string(), model.columns(), model.rows(), scan.true_actor);
+      for (std::size_t k = 0; k < actors.size(); ++k) {
+        tracks[k].times_s.push_back(start);
+        tracks[k].world_from_actor.push_back(actors[k].worldFromActor(start));
+      }
+      for (std::size_t pixel = 0; pixel < scan.true_actor.size(); ++pixel) {
+        if (!std::isfinite(scan.true_range[pixel])) continue;
+        ++returns;
+        const uint16_t label = scan.true_actor[pixel];
+        if (label == 0) continue;
+        ++actor_returns;
+        if (actors[label - 1].name == "truck_left" || actors[label - 1].name == "truck_right") ++truck_returns;
+      }
+    }
     if (pcap) pcap->writeScan(scan.raw);
 #ifdef RIM_WITH_ROSBAG
     if (packet_bag) packet_bag->writeOusterScan(*encoder, scan.raw, kBagEpochNs);
@@ -302,14 +353,23 @@ int runSimulate(SimulateOptions options) {
       std::snprintf(name, sizeof name, "%06d.bin", frame);
       std::vector<Eigen::Vector3f> points;
       std::vector<float> intensities;
+      std::vector<uint32_t> point_labels;
       for (int v = 0; v < model.rows(); ++v)
         for (int u = 0; u < model.columns(); ++u)
           if (scan.image.valid(v, u)) {
             points.push_back(model.unproject(u, v, scan.image.at(v, u)));
             intensities.push_back(scan.image.intensity.empty() ? 0.0f
                                                                : scan.image.intensity[scan.image.index(v, u)] / 255.0f);
+            point_labels.push_back(scan.true_actor[static_cast<std::size_t>(v) * model.columns() + u]);
           }
       io::writeKittiVelodyne((out / "velodyne" / name).string(), points, intensities);
+      if (!actors.empty()) {  // one little-endian uint32 per point of the .bin, as SemanticKITTI's .label
+        std::snprintf(name, sizeof name, "%06d.label", frame);
+        std::ofstream labels(out / "labels" / name, std::ios::binary);
+        labels.write(reinterpret_cast<const char*>(point_labels.data()),
+                     static_cast<std::streamsize>(point_labels.size() * sizeof(uint32_t)));
+        if (!labels) throw std::runtime_error("cannot write " + (out / "labels" / name).string());
+      }
     }
     showProgress(frame + 1, options.frames, started);
   }
@@ -331,6 +391,9 @@ int runSimulate(SimulateOptions options) {
     io::writeTumPoses((out / "poses_sensor_tum.txt").string(), sensor_poses, sensor_info);
   }
   io::saveMeshFile((out / "scene.ply").string(), scene.mesh);
+  if (!actors.empty())
+    io::writeActorTracks((out / "actors.txt").string(), tracks,
+                         "rim simulate, seed " + std::to_string(options.seed) + ", pose at each scan's first column");
   SurfaceSampleOptions sampling;
   sampling.spacing_m = options.surface_spacing_m;
   sampling.seed = options.seed;
@@ -342,6 +405,9 @@ int runSimulate(SimulateOptions options) {
             << sensor.model->rows() << " x " << sensor.model->columns() << ") in " << seconds << " s; "
             << scene.mesh.triangles.size() << " scene triangles, " << surface.size()
             << " ground-truth surface samples; written to " << out.string() << "\n";
+  if (!actors.empty() && returns > 0)
+    std::cout << actors.size() << " moving actors: " << 100.0 * actor_returns / returns << " % of the true returns ("
+              << 100.0 * truck_returns / returns << " % on the trucks alongside)\n";
   return 0;
 }
 
@@ -355,7 +421,7 @@ std::vector<std::string> simulationPresetNames() {
 
 bool isIndoorPreset(const std::string& preset) {
   for (const Preset& candidate : kPresets)
-    if (preset == candidate.name) return candidate.scene == SceneKind::kIndoor;
+    if (preset == candidate.name) return std::string(candidate.scene) == "indoor";
   return false;
 }
 
@@ -381,8 +447,10 @@ void addSimulateCommand(Command& rim) {
   command.option("--frames", options->frames, "number of scans (default: the preset's)").check(inRange(1, 100000));
   command.option("--seed", options->seed, "scene, motion and noise seed");
   command.option("--sensor", options->sensor, "Ouster metadata JSON, OS-0-128, OS-1-128 or hdl64");
-  command.option("--scene", options->scene, "indoor, outdoor, or a PLY/OBJ mesh");
-  command.option("--motion", options->motion, "car, cart, handheld, or a KITTI/TUM pose file");
+  command.option("--scene", options->scene, "indoor, outdoor, traffic (with moving actors), or a PLY/OBJ mesh");
+  command.option("--motion", options->motion,
+                 "car, cart, handheld, traffic (the traffic scene's stop-and-go), or a KITTI/TUM pose file");
+  command.flag("--no-actors", options->no_actors, "the traffic scene without its moving actors");
   command.option("--formats", options->formats, "comma-separated: pcap, bag, points-bag, kitti");
   command.option("--profile", options->profile, "Ouster UDP profile of the packets")
       .check(oneOf({"LEGACY", "RNG19_RFL8_SIG16_NIR16", "RNG19_RFL8_SIG16_NIR16_DUAL", "RNG15_RFL8_NIR8"}));

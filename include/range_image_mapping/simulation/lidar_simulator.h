@@ -3,6 +3,7 @@
 #pragma once
 
 #include "range_image_mapping/ouster_packet.h"
+#include "range_image_mapping/simulation/moving_actors.h"
 #include "range_image_mapping/simulation/ray_caster.h"
 #include "range_image_mapping/simulation/trajectory.h"
 
@@ -31,6 +32,10 @@ struct SimulatedScan {
   // divergence and millimetre quantisation; NaN where the ray reaches no
   // surface or the column is outside the column window.
   std::vector<float> true_range;
+  // Ground truth per pixel (row-major H x W), for the same centre ray: 0 where
+  // it met the static scene or nothing, k + 1 where its first surface is moving
+  // actor k (LidarSimulator::setActors). All 0 without actors.
+  std::vector<uint16_t> true_actor;
 };
 
 // What the scan holds (raw is single-return with signal, the fields of LEGACY
@@ -57,6 +62,13 @@ class LidarSimulator {
   // missing model, bad effects or a frequency that is not positive.
   LidarSimulator(LidarModelConstPtr model, const RayCaster& caster, SensorEffects effects,
                  uint32_t seed, double frequency_hz = 10.0);
+  // Moving actors, cast together with the scene: each column sees them posed
+  // at its own time (the scan start without motion distortion), and the
+  // nearer of scene and actor wins. nullptr or an empty list: none, and the
+  // scans are exactly those of a simulator without actors. The list must
+  // outlive the simulator; at most 65534 actors.
+  void setActors(const std::vector<MovingActor>* actors);
+
   // The revolution whose column 0 fires at start_time_s; frame_id is stored in raw.
   // Parallel over columns (TBB). Throws std::out_of_range when the trajectory
   // does not cover the revolution's time span, std::invalid_argument for a
@@ -77,9 +89,11 @@ class LidarSimulator {
   struct ColumnBuffers;
   void simulateColumn(int column, const Eigen::Isometry3d& pose, uint32_t frame_id,
                       SimulatedScan& scan, ColumnBuffers& buffers) const;
+  void castActors(double time_s, float reach_m, ColumnBuffers& buffers) const;
 
   LidarModelConstPtr model_;
   const RayCaster& caster_;
+  const std::vector<MovingActor>* actors_ = nullptr;
   SensorEffects effects_;
   uint32_t seed_;
   double frequency_hz_;
