@@ -315,6 +315,18 @@ std::string surfaceReportJson(const SurfaceMetrics& metrics, const SurfaceReport
   report["accuracy"]["median_m"] = metrics.accuracy_median_m;
   report["completeness"]["mean_m"] = metrics.completeness_mean_m;
   report["completeness"]["median_m"] = metrics.completeness_median_m;
+  if (!context.actors_path.empty()) {
+    Json::Value& trail = report["moving_actor_trail"];
+    trail["actors"] = context.actors_path;
+    trail["margin_m"] = context.actor_trail_margin_m;
+    trail["estimate_points_inside"] = Json::UInt64(context.actor_trail.points_inside);
+    trail["share"] = context.actor_trail.share;
+    // Mesh area inside the swept volumes: each area sample stands for area / samples.
+    if (context.estimate.from_mesh && context.estimate.points > 0)
+      trail["area_m2"] = context.estimate.area_m2 * context.actor_trail.share;
+    for (const ActorTrail::PerKind& kind : context.actor_trail.by_kind)
+      trail["points_inside_by_kind"][kind.kind] = Json::UInt64(kind.points_inside);
+  }
   return writeJson(toJson(context.notes, report));
 }
 
@@ -348,6 +360,20 @@ std::string surfaceSummaryLine(const SurfaceMetrics& metrics) {
          formatted("%.4g", metrics.threshold_m) + " m | Chamfer " +
          formatted("%.4g", metrics.chamfer_m) + " m | " + std::to_string(metrics.estimate_points) +
          " estimate / " + std::to_string(metrics.ground_truth_points) + " ground-truth points";
+}
+
+std::string actorTrailSummaryLine(const SurfaceReportContext& context) {
+  const ActorTrail& trail = context.actor_trail;
+  std::string line = "moving-actor trail: " + std::to_string(trail.points_inside) + " of " +
+                     std::to_string(trail.points) + " estimate points (" + formatted("%.3f", 100.0 * trail.share) +
+                     " %)";
+  if (context.estimate.from_mesh)
+    line += ", " + formatted("%.2f", context.estimate.area_m2 * trail.share) + " m2 of mesh";
+  line += " inside the volumes the actors swept";
+  std::string kinds;
+  for (const ActorTrail::PerKind& kind : trail.by_kind)
+    kinds += (kinds.empty() ? "" : ", ") + kind.kind + " " + std::to_string(kind.points_inside);
+  return line + (kinds.empty() ? "" : " (" + kinds + ")");
 }
 
 // ---------------------------------------------------------------- plots

@@ -3,7 +3,9 @@
 // distance-coloured PLY maps.
 #include "commands.h"
 
+#include "range_image_mapping/evaluation/actor_trail.h"
 #include "range_image_mapping/evaluation/report.h"
+#include "range_image_mapping/io/actor_tracks.h"
 
 #include <filesystem>
 #include <fstream>
@@ -38,6 +40,8 @@ struct SurfaceOptions {
   double sample_spacing_m = 0;  // 0: a quarter of the threshold
   uint32_t seed = 0;
   std::size_t max_samples = 50'000'000;
+  std::string actors;  // moving actors' tracks; default: actors.txt next to the ground truth, if there
+  double actor_margin_m = 0.1;
   OutputOptions output;
 };
 
@@ -153,6 +157,19 @@ void runSurfaceEvaluation(const SurfaceOptions& options) {
     context.notes.warnings.push_back("the sample spacing is more than half the threshold: holes between "
                                      "samples lower precision and recall");
   for (const std::string& warning : context.notes.warnings) std::cerr << "warning: " << warning << "\n";
+  // Simulated sequences with moving actors: what the estimate kept of them.
+  std::string actors_path = options.actors;
+  if (actors_path.empty()) {
+    const auto beside = std::filesystem::path(options.ground_truth).parent_path() / "actors.txt";
+    if (std::filesystem::exists(beside)) actors_path = beside.string();
+  }
+  if (!actors_path.empty()) {
+    ActorTrailOptions trail_options;
+    trail_options.margin_m = options.actor_margin_m;
+    context.actors_path = actors_path;
+    context.actor_trail_margin_m = trail_options.margin_m;
+    context.actor_trail = measureActorTrail(estimate.points, io::readActorTracks(actors_path), trail_options);
+  }
 
   const std::string& directory = options.output.plots_directory;
   if (!directory.empty()) {
@@ -166,7 +183,8 @@ void runSurfaceEvaluation(const SurfaceOptions& options) {
     context.notes.outputs.push_back(directory + "/precision_map.ply");
     context.notes.outputs.push_back(directory + "/recall_map.ply");
   }
-  writeReport(options.output, surfaceReportJson(metrics, context), surfaceSummaryLine(metrics));
+  writeReport(options.output, surfaceReportJson(metrics, context),
+              surfaceSummaryLine(metrics) + (context.actors_path.empty() ? "" : "\n" + actorTrailSummaryLine(context)));
 }
 
 void addTrajectoryCommand(Command& eval) {
@@ -221,6 +239,14 @@ void addSurfaceCommand(Command& eval) {
   command.option("--seed", options->seed, "seed of the mesh samples").showDefault();
   command.option("--max-samples", options->max_samples, "refuse meshes that need more samples")
       .check(positive())
+      .showDefault();
+  command.option("--actors", options->actors,
+                 "moving actors' tracks (rim simulate's actors.txt; default: the one next to the ground truth): "
+                 "report what the estimate kept inside the volumes they swept")
+      .check(existingFile());
+  command.option("--actor-margin", options->actor_margin_m,
+                 "swept boxes grow by this sideways and upward and their bottoms rise by it, m")
+      .check(nonNegative())
       .showDefault();
   addOutputOptions(command, options->output);
   command.callback([options, &command] {

@@ -2,6 +2,7 @@
 // by gnuplot, and distance-coloured PLY clouds for precision/recall maps.
 #pragma once
 
+#include "range_image_mapping/evaluation/actor_trail.h"
 #include "range_image_mapping/evaluation/surface_metrics.h"
 #include "range_image_mapping/evaluation/trajectory_metrics.h"
 
@@ -42,6 +43,11 @@ struct SurfaceReportContext {
   double sample_spacing_m = 0;   // for meshes
   uint32_t seed = 0;
   ReportNotes notes;
+  // What the estimate kept of moving actors (measured on its samples), when
+  // their tracks were given; actors_path empty otherwise.
+  std::string actors_path;
+  ActorTrail actor_trail;
+  double actor_trail_margin_m = 0;
 };
 
 // Pretty-printed JSON text (statistics as count/rmse/mean/std/min/q1/median/q3/max).
@@ -52,6 +58,8 @@ std::string surfaceReportJson(const SurfaceMetrics& metrics, const SurfaceReport
 // One line, no trailing newline.
 std::string trajectorySummaryLine(const TrajectoryEvaluation& evaluation);
 std::string surfaceSummaryLine(const SurfaceMetrics& metrics);
+// "moving-actor trail: ..." for SurfaceReportContext::actor_trail.
+std::string actorTrailSummaryLine(const SurfaceReportContext& context);
 
 // gnuplot missing, or failing; what() says which and how to get it.
 class PlotError : public std::runtime_error {
