@@ -15,9 +15,9 @@
 #    own (.noetic_chroot/catkin_ws, .noetic_chroot/out), never the host's.
 # 3. Inside: `bash scripts/setup.sh demo` (installs the Debian packages, builds
 #    with catkin_make, runs the demo) with RIM_BENCHMARKS=0 (lean: no benchmark
-#    programs, no PCL or Google Benchmark), then builds every test (catkin's
-#    `tests` target, so all of them must compile with GCC 10) and runs the unit
-#    tests with ctest, excluding
+#    programs, no PCL or Google Benchmark), then builds the unit tests (the
+#    `rim_unit_tests` target: every gtest, not the rostest nodes) and runs them
+#    with ctest, excluding
 #      * the rostests (_rostest_): they start roscore and nodelet managers and
 #        replay bags in real time, and test ros_comm behaviour rather than the
 #        toolchain;
@@ -168,8 +168,8 @@ step_done
 echo "   versions: $(in_chroot "dpkg-query -W -f='\${Package} \${Version}, ' g++ cmake catkin python3-rosbag \
   libeigen3-dev libtbb-dev libboost-dev libnanoflann-dev libembree-dev libpcl-dev 2>/dev/null || true")"
 
-step "unit tests: build (catkin_make tests)"
-in_chroot "cd .catkin_ws && catkin_make -DPYTHON_EXECUTABLE=/usr/bin/python3 -j2 tests >build_tests.log 2>&1 ||
+step "unit tests: build (catkin_make rim_unit_tests)"
+in_chroot "cd .catkin_ws && catkin_make -DPYTHON_EXECUTABLE=/usr/bin/python3 -j2 rim_unit_tests >build_tests.log 2>&1 ||
   { tail -n 60 build_tests.log; exit 1; }"
 step_done
 excluded='_rostest_|^fuzz_|_preset_accuracy_test$|_mapping_accuracy_test$'
