@@ -245,7 +245,10 @@ TEST(LidarOdometry, RejectsOptionsThatCannotWork) {
   options.max_time_gap_s = 0.0;
   EXPECT_THROW(LidarOdometry{options}, std::invalid_argument);
   options = {};
-  options.keyframe_distance_m = -1.0;
+  options.model.keyframe_distance_m = -1.0;
+  EXPECT_THROW(LidarOdometry{options}, std::invalid_argument);
+  options = {};
+  options.model.keyframes = 0;
   EXPECT_THROW(LidarOdometry{options}, std::invalid_argument);
   options = {};
   options.deskew_passes = -1;

@@ -37,7 +37,7 @@ std::string seconds(double value) {
 }  // namespace
 
 LidarOdometry::LidarOdometry(OdometryOptions options)
-    : options_(std::move(options)), icp_(options_.registration) {
+    : options_(std::move(options)), icp_(options_.registration), model_(options_.model) {
   if (!(options_.max_time_gap_s > 0.0))
     throw std::invalid_argument("odometry: max_time_gap_s must be positive, not " +
                                 std::to_string(options_.max_time_gap_s));
@@ -49,8 +49,6 @@ LidarOdometry::LidarOdometry(OdometryOptions options)
                                 std::to_string(options_.deskew_passes));
   if (!(options_.deskew_convergence_rad >= 0.0) || !(options_.deskew_convergence_m >= 0.0))
     throw std::invalid_argument("odometry: deskew convergence thresholds must not be negative");
-  if (options_.keyframe_distance_m < 0.0 || options_.keyframe_angle_rad < 0.0)
-    throw std::invalid_argument("odometry: keyframe distance and angle must not be negative");
   const std::pair<const char*, double> limits[] = {
       {"max_speed_mps", options_.max_speed_mps},
       {"max_angular_rate_radps", options_.max_angular_rate_radps},
@@ -63,8 +61,9 @@ LidarOdometry::LidarOdometry(OdometryOptions options)
 }
 
 void LidarOdometry::reset() {
-  pose_ = keyframe_pose_ = Eigen::Isometry3d::Identity();
+  pose_ = target_pose_ = Eigen::Isometry3d::Identity();
   twist_.setZero();
+  model_.clear();
   has_target_ = false;
   velocity_known_ = false;
   last_stamp_ns_ = 0;
@@ -78,12 +77,12 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
   const auto started = std::chrono::steady_clock::now();
   OdometryUpdate update;
   // Nothing non-finite ever leaves: a step that would give one is undone.
-  const Eigen::Isometry3d previous_pose = pose_, previous_keyframe_pose = keyframe_pose_;
+  const Eigen::Isometry3d previous_pose = pose_, previous_target_pose = target_pose_;
   const Twist previous_twist = twist_;
   const auto finish = [&]() {
     if (!isFinite(pose_) || !twist_.allFinite()) {
       pose_ = previous_pose;
-      keyframe_pose_ = previous_keyframe_pose;
+      target_pose_ = previous_target_pose;
       twist_ = previous_twist;
       update.degenerate = true;
       update.warning += std::string(update.warning.empty() ? "" : "; ") +
@@ -135,11 +134,14 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
   }
   const double dt = double(stamp - last_stamp_ns_) * 1e-9;
 
-  // Constant-velocity prior, deskewed source, registration to the target.
+  // Constant-velocity prior, the model rendered where it puts the scan, the
+  // deskewed source registered to it.
   const Vector6d prior_twist = options_.constant_velocity_prior ? twist_ : Vector6d::Zero();
   const Eigen::Isometry3d prior_step = twistExponential(dt * prior_twist);  // T_previous_current
-  const Eigen::Isometry3d target_from_previous = keyframe_pose_.inverse() * pose_;
-  const Eigen::Isometry3d guess = target_from_previous * prior_step;
+  target_pose_ = orthonormalized(pose_ * prior_step);
+  model_.render(*scan.model, target_pose_, rendered_);
+  icp_.setTarget(scan.model, rendered_);
+  const Eigen::Isometry3d guess = Eigen::Isometry3d::Identity();  // T_target_current
   computeVertexNormalMap(scan, 1, options_.registration.normals, measured_);
   icp_.setSource(measured_);
   // The source is deskewed inside the registration: each column moved by
@@ -172,14 +174,15 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
   // opposite to the deskew error and by about half of it (the registration
   // fits the scan's average warp), so the next deskew blends it with the
   // one used: plain substitution oscillates and converges slowly,
-  // extrapolation diverges. Only against a deskewed target: a source
-  // deskewed to a target that is not (the first after a restart) would be
-  // registered to a different shape.
+  // extrapolation diverges. Only against a deskewed model: a source
+  // deskewed to a target that is not (the first scan after a restart) would
+  // be registered to a different shape.
   constexpr double kMeasuredTwistShare = 0.6;
   constexpr double kMeasurableScale = 100.0;
   const std::size_t finest = options_.registration.strides.size() - 1;
   RegistrationResult result;
-  if (!options_.deskew || options_.deskew_passes == 0 || !target_deskewed_) {
+  const bool column_times = scan.column_timestamp_ns.size() == std::size_t(scan.columns());
+  if (!options_.deskew || options_.deskew_passes == 0 || !column_times || model_.provisional()) {
     result = icp_.alignSource(guess, {}, columnMotion(deskew_twist));
   } else {
     LevelSchedule coarse;
@@ -198,7 +201,7 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
     for (int k = 0; k < max_steps && isFinite(result.target_from_source); ++k) {
       const bool redeskewed = measurable && passes < options_.deskew_passes;
       if (redeskewed) {
-        const Vector6d measured_twist = twistBetween(pose_, keyframe_pose_ * result.target_from_source, dt);
+        const Vector6d measured_twist = twistBetween(pose_, target_pose_ * result.target_from_source, dt);
         deskew_twist = kMeasuredTwistShare * measured_twist + (1.0 - kMeasuredTwistShare) * deskew_twist;
         ++passes;
       }
@@ -231,7 +234,7 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
   // than the static world, or a wrong minimum: not trusted.
   Twist registered_twist = Twist::Zero();
   if (degeneracy.empty()) {
-    registered_twist = twistBetween(pose_, keyframe_pose_ * result.target_from_source, dt);
+    registered_twist = twistBetween(pose_, target_pose_ * result.target_from_source, dt);
     const std::string limit = physicalLimitBroken(registered_twist, dt);
     if (!limit.empty()) {
       update.limit_exceeded = true;
@@ -258,7 +261,7 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
     twist_ = registered_twist;
     velocity_known_ = true;
   }
-  pose_ = orthonormalized(keyframe_pose_ * target_from_current);
+  pose_ = orthonormalized(target_pose_ * target_from_current);
   last_stamp_ns_ = stamp;
 
   // The next target: this scan deskewed with the velocity just estimated.
@@ -267,18 +270,9 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
     moveColumns(measured_, deskewed_);
   else
     deskewed_ = measured_;
-  const Eigen::Isometry3d from_keyframe = keyframe_pose_.inverse() * pose_;
-  const bool keyframes = options_.keyframe_distance_m > 0.0 || options_.keyframe_angle_rad > 0.0;
-  const bool new_keyframe =
-      !keyframes ||
-      (options_.keyframe_distance_m > 0.0 && from_keyframe.translation().norm() >= options_.keyframe_distance_m) ||
-      (options_.keyframe_angle_rad > 0.0 &&
-       Eigen::AngleAxisd(from_keyframe.linear()).angle() >= options_.keyframe_angle_rad);
-  if (new_keyframe) {
-    makeTarget(scan, deskewed);
-    target_deskewed_ = deskewed;
-    keyframe_pose_ = pose_;
-  }
+  // A step that fell back to the prior has an uncertain pose: the model waits
+  // for a registered one, unless it has nothing deskewed yet.
+  if ((!update.degenerate || model_.provisional()) && model_.wantsKeyframe(pose_)) addKeyframe(scan, deskewed);
   return finish();
 }
 
@@ -303,17 +297,39 @@ std::string LidarOdometry::physicalLimitBroken(const Twist& twist, double dt_s) 
   return {};
 }
 
+// A keyframe that should have been deskewed with a measured velocity and
+// could not be (the first scans after a restart) is replaced by the next one.
+bool LidarOdometry::provisional(const RangeImage& scan) const {
+  return options_.deskew && !velocity_known_ && scan.column_timestamp_ns.size() == std::size_t(scan.columns());
+}
+
 void LidarOdometry::restart(const RangeImage& scan, uint64_t stamp_ns) {
   twist_.setZero();
   velocity_known_ = false;
   if (!isFinite(pose_)) pose_.setIdentity();  // never restart from a non-finite pose
   computeVertexNormalMap(scan, 1, options_.registration.normals, measured_);
   deskewed_ = measured_;
-  makeTarget(scan, false);
-  target_deskewed_ = false;
-  keyframe_pose_ = pose_;
+  model_.clear();
+  addKeyframe(scan, false);
+  target_pose_ = pose_;
   last_stamp_ns_ = stamp_ns;
   has_target_ = true;
+}
+
+// The scan's pyramid, each level's normals at its own stride (the paper's
+// coarse levels), deskewed as deskewed_ is, into the model at pose_.
+void LidarOdometry::addKeyframe(const RangeImage& scan, bool deskewed) {
+  const std::vector<int>& strides = options_.registration.strides;
+  keyframe_levels_.resize(strides.size());
+  for (std::size_t level = 0; level < strides.size(); ++level) {
+    if (strides[level] == 1) {
+      keyframe_levels_[level] = deskewed_;
+      continue;
+    }
+    computeVertexNormalMap(scan, strides[level], options_.registration.normals, keyframe_levels_[level]);
+    if (deskewed) moveColumns(keyframe_levels_[level], keyframe_levels_[level]);
+  }
+  model_.add(keyframe_levels_, pose_, provisional(scan));
 }
 
 // Each column's points and normals, measured at the column's time, moved into
@@ -336,43 +352,6 @@ void LidarOdometry::moveColumns(const VertexNormalMap& measured, VertexNormalMap
         moved.normals[i] = motion.leftCols<3>() * measured.normals[i];
       }
   });
-}
-
-void LidarOdometry::makeTarget(const RangeImage& scan, bool deskewed) {
-  // Full resolution: this scan's map, deskewed already when it should be.
-  icp_.setTarget(scan, deskewed_);
-  if (!deskewed) return;
-  // The target pyramid deskewed point by point, then filed under the pixel
-  // each moved point projects to (nearest first), so that projective
-  // association finds it where it now is. Re-projecting ranges instead would
-  // snap every point onto its pixel's ray, centimetres off at range.
-  const LidarModel& model = *scan.model;
-  for (std::size_t level = 0; level < options_.registration.strides.size(); ++level) {
-    VertexNormalMap& map = icp_.targetLevel(level);
-    if (map.stride != 1) moveColumns(map, map);
-    const std::size_t size = map.points.size();
-    pixels_.resize(size);
-    hits_.resize(size);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, size, 4096), [&](const tbb::blocked_range<std::size_t>& block) {
-      model.projectMany(map.points.data() + block.begin(), block.size(), pixels_.data() + block.begin(),
-                        hits_.data() + block.begin());
-    });
-    filed_.rows = map.rows;
-    filed_.columns = map.columns;
-    filed_.stride = map.stride;
-    filed_.points.assign(size, Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN()));
-    filed_.normals.assign(size, Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN()));
-    for (std::size_t i = 0; i < size; ++i) {
-      if (!hits_[i]) continue;
-      const std::size_t t = levelPixelIndex(map, pixels_[i]);  // where the ICP will look
-      if (std::isfinite(filed_.points[t].x()) &&
-          filed_.points[t].squaredNorm() <= map.points[i].squaredNorm())
-        continue;
-      filed_.points[t] = map.points[i];
-      filed_.normals[t] = map.normals[i];
-    }
-    std::swap(map, filed_);
-  }
 }
 
 }  // namespace range_image_mapping::registration

@@ -352,6 +352,23 @@ void ProjectiveIcp::setTarget(const RangeImage& target, const VertexNormalMap& f
   setTargetModel(target.model);
 }
 
+void ProjectiveIcp::setTarget(const LidarModelConstPtr& model, std::vector<VertexNormalMap>& levels) {
+  if (!model) throw std::invalid_argument("ProjectiveIcp::setTarget: no sensor model");
+  if (levels.size() != options_.strides.size())
+    throw std::invalid_argument("ProjectiveIcp::setTarget: " + std::to_string(levels.size()) + " levels for " +
+                                std::to_string(options_.strides.size()) + " strides");
+  for (std::size_t level = 0; level < levels.size(); ++level) {
+    const VertexNormalMap& map = levels[level];
+    const int s = options_.strides[level];
+    if (map.stride != s || map.rows != (model->rows() + s - 1) / s || map.columns != (model->columns() + s - 1) / s ||
+        map.points.size() != std::size_t(map.rows) * map.columns || map.normals.size() != map.points.size())
+      throw std::invalid_argument("ProjectiveIcp::setTarget: level " + std::to_string(level) +
+                                  " does not match stride " + std::to_string(s) + " of the model");
+  }
+  target_levels_.swap(levels);
+  setTargetModel(model);
+}
+
 void ProjectiveIcp::setTargetModel(const LidarModelConstPtr& model) {
   target_index_tables_.resize(target_levels_.size());
   for (std::size_t level = 0; level < target_levels_.size(); ++level) {

@@ -271,10 +271,12 @@ OdometryParameters readOdometryParameters(const ros::NodeHandle& private_node) {
       reader.getDouble("max_condition_number", odometry_defaults.max_condition_number, 1.0, 1e300);
   odometry.min_inliers = static_cast<std::size_t>(
       reader.getInt("min_inliers", static_cast<int>(odometry_defaults.min_inliers), 0, 1 << 30));
-  odometry.keyframe_distance_m =
-      reader.getDouble("keyframe_distance", odometry_defaults.keyframe_distance_m, 0.0, 1000.0);
-  odometry.keyframe_angle_rad =
-      reader.getDouble("keyframe_angle_deg", odometry_defaults.keyframe_angle_rad * 180.0 / M_PI, 0.0, 180.0) *
+  odometry.model.keyframes = std::size_t(
+      reader.getInt("model_keyframes", int(odometry_defaults.model.keyframes), 1, 1000));
+  odometry.model.keyframe_distance_m =
+      reader.getDouble("keyframe_distance", odometry_defaults.model.keyframe_distance_m, 0.0, 1000.0);
+  odometry.model.keyframe_angle_rad =
+      reader.getDouble("keyframe_angle_deg", odometry_defaults.model.keyframe_angle_rad * 180.0 / M_PI, 0.0, 180.0) *
       M_PI / 180.0;
   odometry.max_time_gap_s = reader.getDouble("max_time_gap", odometry_defaults.max_time_gap_s, 1e-3, 3600.0);
   odometry.deskew_passes = reader.getInt("deskew_passes", odometry_defaults.deskew_passes, 0, 100);

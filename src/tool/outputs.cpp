@@ -40,8 +40,9 @@ registration::OdometryOptions OdometryCommandLine::options() const {
   options.deskew_passes = deskew_passes;
   options.registration.kernel.scale_m = kernel_scale_m;
   options.registration.max_correspondence_distance_m = max_correspondence_distance_m;
-  options.keyframe_distance_m = keyframe_distance_m;
-  options.keyframe_angle_rad = keyframe_angle_deg * M_PI / 180.0;
+  options.model.keyframes = std::size_t(model_keyframes);
+  options.model.keyframe_distance_m = keyframe_distance_m;
+  options.model.keyframe_angle_rad = keyframe_angle_deg * M_PI / 180.0;
   return options;
 }
 
@@ -51,6 +52,7 @@ Json::Value OdometryCommandLine::json() const {
   json["deskew_passes"] = deskew_passes;
   json["kernel_scale_m"] = kernel_scale_m;
   json["max_correspondence_distance_m"] = options().registration.correspondenceDistance();
+  json["model_keyframes"] = model_keyframes;
   json["keyframe_distance_m"] = keyframe_distance_m;
   json["keyframe_angle_deg"] = keyframe_angle_deg;
   return json;
@@ -78,10 +80,17 @@ void addOdometryOptions(Command& command, OdometryCommandLine& odometry) {
                  "distance gate of a pair at full resolution, m (0: twice the kernel scale)")
       .showDefault()
       .check(nonNegative());
+  command.option("--model-keyframes", odometry.model_keyframes,
+                 "keyframes in the local model each scan is registered to (1 with --keyframe-distance 0 "
+                 "and --keyframe-angle 0: the previous scan)")
+      .showDefault()
+      .check(positive());
   command.option("--keyframe-distance", odometry.keyframe_distance_m,
-                 "register to a keyframe renewed after this distance, m (0: previous scan)")
+                 "a scan becomes a keyframe this far from the newest one, m (0: every scan)")
+      .showDefault()
       .check(nonNegative());
-  command.option("--keyframe-angle", odometry.keyframe_angle_deg, "... or after this rotation, degrees")
+  command.option("--keyframe-angle", odometry.keyframe_angle_deg, "... or after this rotation, degrees (0: off)")
+      .showDefault()
       .check(nonNegative());
 }
 

@@ -37,8 +37,9 @@ struct OdometryCommandLine {
   int deskew_passes = registration::OdometryOptions().deskew_passes;
   double kernel_scale_m = 0.5;
   double max_correspondence_distance_m = registration::RegistrationOptions().max_correspondence_distance_m;
-  double keyframe_distance_m = 0.0;
-  double keyframe_angle_deg = 0.0;
+  int model_keyframes = int(registration::LocalModelOptions().keyframes);
+  double keyframe_distance_m = registration::LocalModelOptions().keyframe_distance_m;
+  double keyframe_angle_deg = registration::LocalModelOptions().keyframe_angle_rad * 180.0 / M_PI;
   registration::OdometryOptions options() const;
   Json::Value json() const;
 };

@@ -33,7 +33,9 @@ TEST(OdometryParameters, DefaultsWhenNothingIsSet) {
   EXPECT_EQ(parameters.odometry.deskew, core.deskew);
   EXPECT_EQ(parameters.odometry.min_inliers, core.min_inliers);
   EXPECT_EQ(parameters.odometry.max_time_gap_s, core.max_time_gap_s);
-  EXPECT_EQ(parameters.odometry.keyframe_angle_rad, core.keyframe_angle_rad);
+  EXPECT_NEAR(parameters.odometry.model.keyframe_angle_rad, core.model.keyframe_angle_rad, 1e-12);
+  EXPECT_EQ(parameters.odometry.model.keyframe_distance_m, core.model.keyframe_distance_m);
+  EXPECT_EQ(parameters.odometry.model.keyframes, core.model.keyframes);
   EXPECT_EQ(parameters.odometry.deskew_passes, core.deskew_passes);
   EXPECT_EQ(parameters.odometry.max_speed_mps, core.max_speed_mps);
   EXPECT_NEAR(parameters.odometry.max_angular_rate_radps, core.max_angular_rate_radps, 1e-12);
@@ -82,7 +84,7 @@ TEST(OdometryParameters, ValuesReachTheCoreOptions) {
   EXPECT_EQ(registration.kernel.alpha, 0.0);
   EXPECT_EQ(registration.normals.method, NormalMethod::kCovariance);
   EXPECT_FALSE(parameters.odometry.deskew);
-  EXPECT_NEAR(parameters.odometry.keyframe_angle_rad, M_PI / 2, 1e-12);
+  EXPECT_NEAR(parameters.odometry.model.keyframe_angle_rad, M_PI / 2, 1e-12);
   EXPECT_EQ(parameters.odometry.min_inliers, 50u);
 }
 

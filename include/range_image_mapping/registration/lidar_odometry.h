@@ -1,8 +1,11 @@
-// Frame-to-frame (or frame-to-keyframe) LiDAR odometry on range images, beyond
-// the paper: constant-velocity prior, per-column deskew, degeneracy fallback,
-// covariance, keyframes, resets on time jumps.
+// Scan-to-model LiDAR odometry on range images, beyond the paper's
+// frame-to-frame: each scan is registered to the local model (recent deskewed
+// keyframes rendered at the predicted pose), with a constant-velocity prior,
+// per-column deskew, degeneracy fallback, physical limits, covariance and
+// resets on time jumps.
 #pragma once
 
+#include "range_image_mapping/registration/local_model.h"
 #include "range_image_mapping/registration/projective_icp.h"
 #include "range_image_mapping/scan_motion.h"
 
@@ -34,9 +37,10 @@ struct OdometryOptions {
   // than min_inliers remain: the motion prior is used instead, and reported.
   double max_condition_number = 1e6;
   std::size_t min_inliers = 200;
-  // Keyframes: 0 = always register to the previous frame.
-  double keyframe_distance_m = 0.0;
-  double keyframe_angle_rad = 0.0;
+  // The reference: model.keyframes recent keyframes, one renewed every
+  // keyframe_distance_m or keyframe_angle_rad (keyframes 1 and both 0: the
+  // previous scan, the paper's frame-to-frame).
+  LocalModelOptions model;
   // A scan more than this after the previous one, or before it, resets the odometry.
   double max_time_gap_s = 1.0;
   // Physical limits of the platform. A registration whose motion breaks one
@@ -65,8 +69,8 @@ enum class RestartReason {
 
 struct OdometryUpdate {
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();  // T_odom_lidar at the scan time
-  // Of the registration T_target_scan (the target is the previous scan unless
-  // keyframes are on), as a perturbation exp(delta) T_target_scan in the
+  // Of the registration T_target_scan (the target: the model rendered at the
+  // predicted pose), as a perturbation exp(delta) T_target_scan in the
   // target's lidar frame, order [rotation, translation]:
   // the inverse hessian scaled by the residual variance. Identity (1 rad^2,
   // 1 m^2: unknown) on a reset, a skipped or a degenerate scan.
@@ -93,8 +97,9 @@ struct OdometryUpdate {
 // the last registered step, then refined: see deskew_passes); columns without
 // a timestamp are left in place.
 // After registration the scan is deskewed again with the new velocity, and
-// is the next target (its pyramid's points moved and filed under the pixels
-// they now project to, their coordinates kept exact).
+// joins the local model when it is a keyframe; the model is rendered at each
+// scan's predicted pose (points filed under the pixels they project to, their
+// coordinates kept exact).
 class LidarOdometry {
  public:
   explicit LidarOdometry(OdometryOptions options = {});
@@ -126,25 +131,23 @@ class LidarOdometry {
   // current velocity for the acceleration.
   std::string physicalLimitBroken(const Twist& twist, double dt_s) const;
   void moveColumns(const VertexNormalMap& measured, VertexNormalMap& moved) const;
-  // From the scan and deskewed_ (its full-resolution map, deskewed when
-  // `deskewed`).
-  void makeTarget(const RangeImage& scan, bool deskewed);
+  bool provisional(const RangeImage& scan) const;
+  void addKeyframe(const RangeImage& scan, bool deskewed);
 
   OdometryOptions options_;
   ProjectiveIcp icp_;
   Eigen::Isometry3d pose_ = Eigen::Isometry3d::Identity();       // T_odom_lidar, last scan
-  Eigen::Isometry3d keyframe_pose_ = Eigen::Isometry3d::Identity();  // T_odom_target
+  Eigen::Isometry3d target_pose_ = Eigen::Isometry3d::Identity();  // T_odom_target: where the model was rendered
+  LocalModel model_;
   Eigen::Matrix<double, 6, 1> twist_ = Eigen::Matrix<double, 6, 1>::Zero();  // [angular, linear], body frame
   bool has_target_ = false;
   bool velocity_known_ = false;  // twist_ was measured since the last restart
-  bool target_deskewed_ = false;
   uint64_t last_stamp_ns_ = 0;
   // Reused buffers: the scan's points as measured, deskewed, and the target.
   VertexNormalMap measured_, deskewed_;
   std::vector<ColumnMotion> column_motion_;  // per column: [R | t] to the scan time
-  std::vector<ProjectedPixel> pixels_;  // target points re-filed by pixel
-  std::vector<uint8_t> hits_;
-  VertexNormalMap filed_;
+  std::vector<VertexNormalMap> rendered_;  // the model's levels at the predicted pose
+  std::vector<VertexNormalMap> keyframe_levels_;
   RangeImage staggered_;  // destaggered input, re-staggered
 };
 

@@ -90,11 +90,13 @@ class ProjectiveIcp {
   // std::invalid_argument when its size or stride does not match the image.
   void setTarget(const RangeImage& target, const VertexNormalMap& full_resolution);
   bool hasTarget() const { return target_model_ != nullptr; }
+  // A target rendered elsewhere (the odometry's local model): one map per
+  // stride of the options, each point filed under the level pixel it
+  // projects to with `model` (levelPixelIndex), or association will not find
+  // it. The maps are swapped in: `levels` gets the previous target's buffers
+  // back. Throws std::invalid_argument when their number or strides differ.
+  void setTarget(const LidarModelConstPtr& model, std::vector<VertexNormalMap>& levels);
   const VertexNormalMap& targetLevel(std::size_t level) const { return target_levels_.at(level); }
-  // For callers that move the target's points after setTarget (deskewing):
-  // each point must stay filed under the level pixel it projects to
-  // (levelPixelIndex), or association will not find it.
-  VertexNormalMap& targetLevel(std::size_t level) { return target_levels_.at(level); }
   // Source points in their own lidar frame (e.g. deskewed), with normals;
   // pixels without a normal are not used. At level s the source is read every
   // s * source_stride pixels. Throws std::runtime_error without a target,
