@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 namespace range_image_mapping::pipeline {
@@ -80,7 +81,16 @@ ScanResult ScanToMapPipeline::process(const RangeImage& scan, bool source_starte
     result.world_from_lidar = options_.base_from_lidar * update.pose;
     result.world_from_base = result.world_from_lidar * options_.base_from_lidar.inverse();
     result.twist << update.angular_velocity, update.linear_velocity;
-    integrate(scan, result, &odometry_->measuredScan());
+    if (update.moving_pixels > 0) {
+      // Moving objects stay out of the map: no trail where they passed.
+      without_moving_ = scan.column_order == ColumnOrder::kStaggered ? scan : scan.staggered();
+      const std::vector<uint8_t>& moving = odometry_->movingPixels();
+      for (std::size_t i = 0; i < moving.size() && i < without_moving_.range.size(); ++i)
+        if (moving[i]) without_moving_.range[i] = std::numeric_limits<float>::quiet_NaN();
+      integrate(without_moving_, result, &odometry_->measuredScan());
+    } else {
+      integrate(scan, result, &odometry_->measuredScan());
+    }
   }
   result.odometry = std::move(update);
   meshOnCadence(result);

@@ -4,11 +4,14 @@
 
 #include <Eigen/LU>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <limits>
+#include <optional>
 #include <sstream>
 
 namespace range_image_mapping::registration {
@@ -49,6 +52,11 @@ LidarOdometry::LidarOdometry(OdometryOptions options)
                                 std::to_string(options_.deskew_passes));
   if (!(options_.deskew_convergence_rad >= 0.0) || !(options_.deskew_convergence_m >= 0.0))
     throw std::invalid_argument("odometry: deskew convergence thresholds must not be negative");
+  if (!(options_.moving_margin_m >= 0.0) || !std::isfinite(options_.moving_margin_m) ||
+      !(options_.moving_warning_share > 0.0 && options_.moving_warning_share <= 1.0) ||
+      !(options_.min_inlier_share >= 0.0 && options_.min_inlier_share <= 1.0))
+    throw std::invalid_argument("odometry: moving_margin_m must be finite and >= 0 (0: off) and "
+                                "moving_warning_share within (0, 1], min_inlier_share within [0, 1]");
   const std::pair<const char*, double> limits[] = {
       {"max_speed_mps", options_.max_speed_mps},
       {"max_angular_rate_radps", options_.max_angular_rate_radps},
@@ -143,7 +151,7 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
   icp_.setTarget(scan.model, rendered_);
   const Eigen::Isometry3d guess = Eigen::Isometry3d::Identity();  // T_target_current
   computeVertexNormalMap(scan, 1, options_.registration.normals, measured_);
-  icp_.setSource(measured_);
+  icp_.setSource(sourceWithoutMoving());
   // The source is deskewed inside the registration: each column moved by
   // exp((t - t0) twist) before the pose (none for a zero twist or a scan
   // without column times).
@@ -242,6 +250,10 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
     }
   }
   Eigen::Isometry3d target_from_current = result.target_from_source;
+  if (isFinite(result.target_from_source)) {
+    update.prior_difference_m = result.target_from_source.translation().norm();  // the guess is the identity
+    update.prior_difference_rad = Eigen::AngleAxisd(result.target_from_source.linear()).angle();
+  }
   if (!degeneracy.empty() || update.limit_exceeded) {
     update.degenerate = true;
     if (!degeneracy.empty()) update.warning = "degenerate registration, " + degeneracy + ": motion prior used";
@@ -270,6 +282,34 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
     moveColumns(measured_, deskewed_);
   else
     deskewed_ = measured_;
+  update.valid_pixels = std::size_t(std::count_if(deskewed_.normals.begin(), deskewed_.normals.end(),
+                                                  [](const Eigen::Vector3f& normal) { return normal.allFinite(); }));
+  moving_.assign(deskewed_.points.size(), 0);
+  if (!update.degenerate) {
+    update.moving_pixels = classifyMoving(*scan.model, target_from_current);
+    const double share = update.valid_pixels ? double(update.moving_pixels) / double(update.valid_pixels) : 0.0;
+    if (share > options_.moving_warning_share) {
+      update.suspect = true;
+      std::ostringstream text;
+      text.precision(2);
+      text << "moving objects fill " << 100.0 * share
+           << " % of the scan: the registration may follow them; their pixels are left out of the model and the map";
+      update.warning += std::string(update.warning.empty() ? "" : "; ") + text.str();
+    }
+    if (update.inlierShare() < options_.min_inlier_share) {
+      update.suspect = true;
+      std::ostringstream text;
+      text.precision(2);
+      text << "only " << 100.0 * update.inlierShare()
+           << " % of the scan's pixels paired with the model: pose suspect (the scene changed, a wrong match, or a "
+              "sensor model that does not fit the data)";
+      update.warning += std::string(update.warning.empty() ? "" : "; ") + text.str();
+    }
+  }
+  // A suspect pose must not look as certain as a good one to whoever fuses
+  // it (the odometry message's covariance).
+  constexpr double kSuspectCovarianceScale = 100.0;
+  if (update.suspect) update.covariance *= kSuspectCovarianceScale;
   // A step that fell back to the prior has an uncertain pose: the model waits
   // for a registered one, unless it has nothing deskewed yet.
   if ((!update.degenerate || model_.provisional()) && model_.wantsKeyframe(pose_)) addKeyframe(scan, deskewed);
@@ -309,6 +349,7 @@ void LidarOdometry::restart(const RangeImage& scan, uint64_t stamp_ns) {
   if (!isFinite(pose_)) pose_.setIdentity();  // never restart from a non-finite pose
   computeVertexNormalMap(scan, 1, options_.registration.normals, measured_);
   deskewed_ = measured_;
+  moving_.assign(measured_.points.size(), 0);
   model_.clear();
   addKeyframe(scan, false);
   target_pose_ = pose_;
@@ -316,18 +357,78 @@ void LidarOdometry::restart(const RangeImage& scan, uint64_t stamp_ns) {
   has_target_ = true;
 }
 
+// Objects that moved in the last scan are left out of this one's source:
+// those that keep pace with the sensor (traffic alongside) stay in the same
+// pixels, others move a few; the mask is grown by kMovingGrowth pixels.
+const VertexNormalMap& LidarOdometry::sourceWithoutMoving() {
+  constexpr int kMovingGrowth = 2;
+  if (moving_.size() != measured_.points.size() ||
+      std::find(moving_.begin(), moving_.end(), uint8_t(1)) == moving_.end())
+    return measured_;
+  source_ = measured_;
+  const int rows = measured_.rows, columns = measured_.columns;
+  for (int row = 0; row < rows; ++row)
+    for (int column = 0; column < columns; ++column) {
+      if (!moving_[std::size_t(row) * columns + column]) continue;
+      for (int r = std::max(0, row - kMovingGrowth); r <= std::min(rows - 1, row + kMovingGrowth); ++r)
+        for (int c = column - kMovingGrowth; c <= column + kMovingGrowth; ++c)
+          source_.normals[std::size_t(r) * columns + std::size_t((c + columns) % columns)].setConstant(
+              std::numeric_limits<float>::quiet_NaN());
+    }
+  return source_;
+}
+
+std::size_t LidarOdometry::classifyMoving(const LidarModel& model, const Eigen::Isometry3d& target_from_current) {
+  if (!(options_.moving_margin_m > 0.0) || model_.provisional()) return 0;
+  const VertexNormalMap& target = icp_.targetLevel(options_.registration.strides.size() - 1);
+  if (target.stride != 1) return 0;
+  const Eigen::Isometry3f transform = target_from_current.cast<float>();
+  const float margin = float(options_.moving_margin_m);
+  const std::size_t size = deskewed_.points.size();
+  return tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, size, 4096), std::size_t(0),
+      [&](const tbb::blocked_range<std::size_t>& block, std::size_t count) {
+        for (std::size_t i = block.begin(); i < block.end(); ++i) {
+          if (!deskewed_.normals[i].allFinite()) continue;
+          const Eigen::Vector3f point = transform * deskewed_.points[i];
+          const std::optional<ProjectedPixel> pixel = model.project(point);
+          if (!pixel) continue;
+          const std::size_t t = levelPixelIndex(target, *pixel);
+          const Eigen::Vector3f& surface = target.points[t];
+          const Eigen::Vector3f& normal = target.normals[t];
+          if (!surface.allFinite() || !normal.allFinite()) continue;
+          // Normals face the sensor: positive is in front of the surface.
+          if (normal.dot(point - surface) > margin && point.norm() < surface.norm()) {
+            moving_[i] = 1;
+            ++count;
+          }
+        }
+        return count;
+      },
+      std::plus<>());
+}
+
 // The scan's pyramid, each level's normals at its own stride (the paper's
 // coarse levels), deskewed as deskewed_ is, into the model at pose_.
 void LidarOdometry::addKeyframe(const RangeImage& scan, bool deskewed) {
   const std::vector<int>& strides = options_.registration.strides;
   keyframe_levels_.resize(strides.size());
+  const bool any_moving = std::find(moving_.begin(), moving_.end(), uint8_t(1)) != moving_.end();
   for (std::size_t level = 0; level < strides.size(); ++level) {
+    VertexNormalMap& map = keyframe_levels_[level];
     if (strides[level] == 1) {
-      keyframe_levels_[level] = deskewed_;
-      continue;
+      map = deskewed_;
+    } else {
+      computeVertexNormalMap(scan, strides[level], options_.registration.normals, map);
+      if (deskewed) moveColumns(map, map);
     }
-    computeVertexNormalMap(scan, strides[level], options_.registration.normals, keyframe_levels_[level]);
-    if (deskewed) moveColumns(keyframe_levels_[level], keyframe_levels_[level]);
+    if (!any_moving) continue;
+    // A level pixel is the full-resolution pixel (s i, s j).
+    const int s = map.stride;
+    for (int row = 0; row < map.rows; ++row)
+      for (int column = 0; column < map.columns; ++column)
+        if (moving_[std::size_t(row * s) * deskewed_.columns + std::size_t(column * s)])
+          map.normals[std::size_t(row) * map.columns + column].setConstant(std::numeric_limits<float>::quiet_NaN());
   }
   model_.add(keyframe_levels_, pose_, provisional(scan));
 }

@@ -36,6 +36,7 @@ struct ChunkPairs {
   alignas(32) float rows[kRows][kProjectionChunk];
   std::size_t count = 0;    // points in the chunk
   std::size_t inliers = 0;  // of them with a pair
+  double area_weights = 0.0;  // sum of the pairs' area weights
 
   // Zeroes the rows up to whole lanes; returns the padded length.
   std::size_t pad() {
@@ -152,12 +153,14 @@ struct NormalEquations {
   std::array<double, 21> hessian_upper{};
   Vector6d gradient = Vector6d::Zero();
   double squared_residuals = 0.0;
+  double area_weights = 0.0;
   std::size_t inliers = 0;
 
   void add(const NormalEquations& other) {
     for (std::size_t k = 0; k < hessian_upper.size(); ++k) hessian_upper[k] += other.hessian_upper[k];
     gradient += other.gradient;
     squared_residuals += other.squared_residuals;
+    area_weights += other.area_weights;
     inliers += other.inliers;
   }
   // J^T W J += sum_k w_k J_k J_k^T; J^T W r += sum_k w_k r_k J_k (paper eq. 6).
@@ -168,6 +171,7 @@ struct NormalEquations {
     for (std::size_t k = 0; k < hessian_upper.size(); ++k) hessian_upper[k] += sums[k];
     for (int i = 0; i < 6; ++i) gradient(i) += sums[hessian_upper.size() + i];
     squared_residuals += sums[kChunkSums - 1];
+    area_weights += pairs.area_weights;
     inliers += pairs.inliers;
   }
   Matrix6d hessian() const {
@@ -221,6 +225,8 @@ NormalEquations accumulate(const std::vector<Eigen::Vector3f>& points, const std
   const float max_distance_squared = float(gate_m * gate_m);
   const float min_cosine = float(options.min_normal_cosine);
   const KernelWeight weight_of(options.kernel);
+  const bool area_weighted = options.area_weight_max_range_m > 0.0;
+  const float max_range_squared = float(options.area_weight_max_range_m * options.area_weight_max_range_m);
 
   // Deterministic: the same blocks summed in the same order on every run and
   // thread count, so rim run and the nodelets give the same poses to the bit.
@@ -241,6 +247,22 @@ NormalEquations accumulate(const std::vector<Eigen::Vector3f>& points, const std
           pairs.inliers = pairRows(moved.data()->data(), source_normals.data()->data(), pixels.data(), hits.data(),
                                    count, target_arrays, max_distance_squared, min_cosine, pairs.rows);
           weight_of.weights(pairs.rows[ChunkPairs::kResidual], pairs.count, pairs.rows[ChunkPairs::kWeight]);
+          if (area_weighted) {
+            // Each pair weighted by the surface its pixel covers (range^2,
+            // relative to the cap): a range image samples near surfaces
+            // densely, and a near object (a truck alongside, the ground
+            // rings) would otherwise outvote the far, static world.
+            pairs.area_weights = 0.0;
+            float* weights = pairs.rows[ChunkPairs::kWeight];
+            for (std::size_t k = 0; k < count; ++k) {
+              const float area = std::min(moved[k].squaredNorm(), max_range_squared) / max_range_squared;
+              weights[k] *= area;
+              if (pairs.rows[3][k] != 0.0f || pairs.rows[4][k] != 0.0f || pairs.rows[5][k] != 0.0f)
+                pairs.area_weights += area;
+            }
+          } else {
+            pairs.area_weights = double(pairs.inliers);
+          }
           sum.add(pairs);
         }
         return sum;
@@ -305,6 +327,8 @@ void validateOptions(const RegistrationOptions& options) {
   if (!(options.min_normal_cosine >= -1.0 && options.min_normal_cosine <= 1.0)) {
     fail("min_normal_cosine must be within [-1, 1]");
   }
+  if (!(options.area_weight_max_range_m >= 0.0) || !std::isfinite(options.area_weight_max_range_m))
+    fail("area_weight_max_range_m must be finite and >= 0 (0: no area weights)");
   if (!(options.kernel.scale_m > 0.0)) fail("kernel.scale_m must be positive");
   if (!std::isfinite(options.kernel.alpha)) fail("kernel.alpha must be finite");
   if (!(options.convergence_rotation_rad >= 0.0) || !(options.convergence_translation_m >= 0.0) ||
@@ -527,7 +551,10 @@ RegistrationResult ProjectiveIcp::alignSource(const Eigen::Isometry3d& initial_t
       }
     }
   }
+  // Area weights scaled to a mean of 1 over the pairs: the hessian keeps
+  // the scale of plain least squares (the covariance reads it).
   result.hessian = last.hessian();
+  if (last.area_weights > 0.0) result.hessian *= double(last.inliers) / last.area_weights;
   result.inliers = last.inliers;
   result.condition_number = conditionNumber(result.hessian);
   result.residual_rms_m = last.inliers ? std::sqrt(last.squared_residuals / double(last.inliers)) : 0.0;

@@ -51,6 +51,10 @@ struct OdometryStatistics {
   std::size_t inliers = 0;         // over registered scans
   std::size_t degenerate = 0;
   std::size_t untrusted = 0;       // registrations that broke a physical limit (among degenerate)
+  std::size_t suspect = 0;         // registered, but few pixels paired or moving objects fill the scan
+  double inlier_share = 0.0;       // sums over registered scans
+  double moving_share = 0.0;
+  double prior_difference_m = 0.0;
   std::size_t skipped = 0;
   std::size_t resets = 0;
   std::size_t dropped_frames = 0;  // gaps in the sensor's frame counter
@@ -66,6 +70,10 @@ struct OdometryStatistics {
     d.inliers = inliers - earlier.inliers;
     d.degenerate = degenerate - earlier.degenerate;
     d.untrusted = untrusted - earlier.untrusted;
+    d.suspect = suspect - earlier.suspect;
+    d.inlier_share = inlier_share - earlier.inlier_share;
+    d.moving_share = moving_share - earlier.moving_share;
+    d.prior_difference_m = prior_difference_m - earlier.prior_difference_m;
     d.skipped = skipped - earlier.skipped;
     d.resets = resets - earlier.resets;
     d.dropped_frames = dropped_frames - earlier.dropped_frames;
@@ -197,6 +205,10 @@ void OdometryNodelet::onRangeImage(const LidarRangeImage::ConstPtr& message) {
       ++statistics_.registered;
       statistics_.iterations += update.iterations;
       statistics_.inliers += update.inliers;
+      statistics_.inlier_share += update.inlierShare();
+      statistics_.moving_share += update.movingShare();
+      statistics_.prior_difference_m += update.prior_difference_m;
+      if (update.suspect) ++statistics_.suspect;
     }
     const double step_s = update.reset || update.skipped || last_update_.stamp_ns == 0 ||
                                   update.stamp_ns <= last_update_.stamp_ns
@@ -335,6 +347,10 @@ void OdometryNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
   status.add("mean step (ms)", window.frames > 0 ? 1e3 * window.seconds / double(window.frames) : 0.0);
   status.add("degenerate", window.degenerate);
   status.add("untrusted (physical limits)", window.untrusted);
+  status.add("suspect (few pairs or many moving pixels)", window.suspect);
+  status.add("mean inlier share", window.inlier_share / registered);
+  status.add("mean moving share", window.moving_share / registered);
+  status.add("mean difference from the motion prior (m)", window.prior_difference_m / registered);
   status.add("skipped", window.skipped);
   status.add("resets", window.resets);
   status.add("dropped frames", window.dropped_frames);
@@ -344,11 +360,15 @@ void OdometryNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
   status.add("last warning", last_warning_);
   if (window.frames == 0)
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "no range images");
-  else if (window.degenerate + window.dropped_frames + window.out_of_order + window.rejected + window.skipped > 0)
+  else if (window.degenerate + window.suspect + window.dropped_frames + window.out_of_order + window.rejected +
+               window.skipped >
+           0)
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN,
                    window.untrusted > 0   ? "registrations broke a physical limit (max_speed, max_angular_rate_deg, "
                                             "max_acceleration): a moving object or a wrong match; motion prior used"
                    : window.degenerate > 0 ? "degenerate registrations"
+                   : window.suspect > 0    ? "suspect registrations: moving objects fill much of the view, or few "
+                                             "pixels pair with the model (check the sensor settings); see last warning"
                                            : "dropped, skipped or out-of-order frames");
   else
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, "tracking");
@@ -358,11 +378,13 @@ void OdometryNodelet::onStatisticsTimer(const ros::SteadyTimerEvent&) {
   const auto [window, period] = log_window_.advance(statistics_);
   if (window.frames == 0 || period <= 0.0) return;
   const double registered = std::max<double>(1.0, double(window.registered));
-  NODELET_INFO("odometry: %.1f Hz, %.1f ms per step, %.1f iterations, %.0f inliers; degenerate %zu (untrusted %zu), "
-               "skipped %zu, resets %zu, dropped %zu, out of order %zu, rejected %zu",
+  NODELET_INFO("odometry: %.1f Hz, %.1f ms per step, %.1f iterations, %.0f inliers (%.0f %% of pixels), %.1f %% "
+               "moving; degenerate %zu (untrusted %zu), suspect %zu, skipped %zu, resets %zu, dropped %zu, out of "
+               "order %zu, rejected %zu",
                double(window.frames) / period, 1e3 * window.seconds / double(window.frames),
-               double(window.iterations) / registered, double(window.inliers) / registered, window.degenerate,
-               window.untrusted, window.skipped, window.resets, window.dropped_frames, window.out_of_order,
+               double(window.iterations) / registered, double(window.inliers) / registered,
+               100.0 * window.inlier_share / registered, 100.0 * window.moving_share / registered, window.degenerate,
+               window.untrusted, window.suspect, window.skipped, window.resets, window.dropped_frames, window.out_of_order,
                window.rejected);
 }
 

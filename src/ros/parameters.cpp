@@ -220,6 +220,8 @@ registration::RegistrationOptions readRegistrationOptions(const ParameterReader&
       "max_correspondence_distance", defaults.max_correspondence_distance_m, 0.0, 100.0);
   options.gate_grows_with_stride = reader.getBool("gate_grows_with_stride", defaults.gate_grows_with_stride);
   options.min_normal_cosine = reader.getDouble("min_normal_cosine", defaults.min_normal_cosine, -1.0, 1.0);
+  options.area_weight_max_range_m =
+      reader.getDouble("area_weight_max_range", defaults.area_weight_max_range_m, 0.0, 1e4);
   options.kernel.type = reader.getChoice("kernel", "pseudo_huber", {"pseudo_huber", "barron"}) == "barron"
                             ? registration::RobustKernel::Type::kBarron
                             : registration::RobustKernel::Type::kPseudoHuber;
@@ -279,6 +281,9 @@ OdometryParameters readOdometryParameters(const ros::NodeHandle& private_node) {
       reader.getDouble("keyframe_angle_deg", odometry_defaults.model.keyframe_angle_rad * 180.0 / M_PI, 0.0, 180.0) *
       M_PI / 180.0;
   odometry.max_time_gap_s = reader.getDouble("max_time_gap", odometry_defaults.max_time_gap_s, 1e-3, 3600.0);
+  odometry.moving_margin_m = reader.getDouble("moving_margin", odometry_defaults.moving_margin_m, 0.0, 100.0);
+  odometry.moving_warning_share =
+      reader.getDouble("moving_warning_share", odometry_defaults.moving_warning_share, 1e-3, 1.0);
   odometry.deskew_passes = reader.getInt("deskew_passes", odometry_defaults.deskew_passes, 0, 100);
   odometry.max_speed_mps = reader.getDouble("max_speed", odometry_defaults.max_speed_mps, 0.0, 1e3);
   odometry.max_angular_rate_radps =

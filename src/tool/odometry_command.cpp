@@ -46,16 +46,15 @@ int runOdometry(const OdometryCommandOptions& options) {
   std::cerr << "odometry over " << recording.description << "\n";
   std::vector<io::StampedPose> poses;
   std::vector<double> step_seconds;
-  int frames = 0, degenerate = 0, resets = 0, skipped = 0;
+  int frames = 0;
+  OdometryHealth health;
   const auto started = std::chrono::steady_clock::now();
   io::forEachScan(recording, [&](const RangeImage& scan) {
     const registration::OdometryUpdate update = odometry.process(scan);
     const double time_s = double(update.stamp_ns) * 1e-9;
     if (!update.skipped) poses.push_back({time_s, update.pose});
     step_seconds.push_back(update.seconds);
-    degenerate += update.degenerate;
-    resets += update.reset && frames > 0;
-    skipped += update.skipped;
+    health.add(update);
     frames_file.add(frames, update);
     if (!update.warning.empty()) std::cerr << "\nwarning: frame " << frames << ": " << update.warning << "\n";
     ++frames;
@@ -77,9 +76,8 @@ int runOdometry(const OdometryCommandOptions& options) {
   summary["input"] = recording.input;
   summary["frames"] = frames;
   summary["poses"] = Json::UInt64(poses.size());
-  summary["degenerate"] = degenerate;
-  summary["resets"] = resets;
-  summary["skipped"] = skipped;
+  const Json::Value health_json = health.json();
+  for (const std::string& key : health_json.getMemberNames()) summary[key] = health_json[key];
   const Json::Value odometry_json = options.odometry.json();
   for (const std::string& key : odometry_json.getMemberNames()) summary[key] = odometry_json[key];
   summary["frame"] = options.frame == "sensor" ? "os_sensor" : recording.frame;
@@ -94,11 +92,10 @@ int runOdometry(const OdometryCommandOptions& options) {
   const std::string summary_path = siblingPath(options.output, "summary.json");
   writeJsonFile(summary_path, summary);
 
-  std::cout << frames << " scans, " << poses.size() << " poses (" << degenerate << " degenerate, " << resets
-            << " resets, " << skipped << " skipped); odometry step " << mean_seconds * 1e3 << " ms mean, "
+  std::cout << frames << " scans, " << poses.size() << " poses (" << health.line() << "); odometry step " << mean_seconds * 1e3 << " ms mean, "
             << median(step_seconds) * 1e3 << " ms median; written to " << options.output << ", " << tum_path
             << ", " << frames_path << ", " << summary_path << "\n";
-  return 0;
+  return reportHealth(health);
 }
 
 }  // namespace

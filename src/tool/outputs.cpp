@@ -8,6 +8,7 @@
 #include <cmath>
 #include <filesystem>
 #include <iomanip>
+#include <iostream>
 #include <sstream>
 
 namespace range_image_mapping::tool {
@@ -41,6 +42,8 @@ registration::OdometryOptions OdometryCommandLine::options() const {
   options.registration.kernel.scale_m = kernel_scale_m;
   options.registration.max_correspondence_distance_m = max_correspondence_distance_m;
   options.model.keyframes = std::size_t(model_keyframes);
+  options.moving_margin_m = moving_margin_m;
+  options.registration.area_weight_max_range_m = area_weight_max_range_m;
   options.model.keyframe_distance_m = keyframe_distance_m;
   options.model.keyframe_angle_rad = keyframe_angle_deg * M_PI / 180.0;
   return options;
@@ -53,6 +56,8 @@ Json::Value OdometryCommandLine::json() const {
   json["kernel_scale_m"] = kernel_scale_m;
   json["max_correspondence_distance_m"] = options().registration.correspondenceDistance();
   json["model_keyframes"] = model_keyframes;
+  json["moving_margin_m"] = moving_margin_m;
+  json["area_weight_max_range_m"] = area_weight_max_range_m;
   json["keyframe_distance_m"] = keyframe_distance_m;
   json["keyframe_angle_deg"] = keyframe_angle_deg;
   return json;
@@ -78,6 +83,15 @@ void addOdometryOptions(Command& command, OdometryCommandLine& odometry) {
       .check(positive());
   command.option("--max-correspondence-distance", odometry.max_correspondence_distance_m,
                  "distance gate of a pair at full resolution, m (0: twice the kernel scale)")
+      .showDefault()
+      .check(nonNegative());
+  command.option("--moving-margin", odometry.moving_margin_m,
+                 "a pixel this far in front of the model's surface is moving: left out of the model and the map, m "
+                 "(0: off)")
+      .showDefault()
+      .check(nonNegative());
+  command.option("--area-weight-range", odometry.area_weight_max_range_m,
+                 "pairs weighted by their pixel's area (range^2) up to this range, m (0: all alike)")
       .showDefault()
       .check(nonNegative());
   command.option("--model-keyframes", odometry.model_keyframes,
@@ -124,10 +138,71 @@ Json::Value mapOptionsJson(const mapping::TsdfMapOptions& map, bool deskew) {
   return json;
 }
 
+void OdometryHealth::add(const registration::OdometryUpdate& update) {
+  degenerate_ += update.degenerate;
+  untrusted_ += update.limit_exceeded;
+  suspect_ += update.suspect;
+  resets_ += update.reset && frames_ > 0;
+  skipped_ += update.skipped;
+  ++frames_;
+  if (update.skipped || update.reset) return;
+  ++registered_;
+  inlier_share_ += update.inlierShare();
+  moving_share_ += update.movingShare();
+  most_moving_share_ = std::max(most_moving_share_, update.movingShare());
+  prior_difference_m_ += update.prior_difference_m;
+}
+
+Json::Value OdometryHealth::json() const {
+  const double registered = std::max(1, registered_);
+  Json::Value json;
+  json["degenerate"] = degenerate_;
+  json["untrusted"] = untrusted_;
+  json["suspect"] = suspect_;
+  json["resets"] = resets_;
+  json["skipped"] = skipped_;
+  json["mean_inlier_share"] = inlier_share_ / registered;
+  json["mean_moving_share"] = moving_share_ / registered;
+  json["max_moving_share"] = most_moving_share_;
+  json["mean_prior_difference_m"] = prior_difference_m_ / registered;
+  return json;
+}
+
+std::string OdometryHealth::line() const {
+  const double registered = std::max(1, registered_);
+  std::ostringstream text;
+  text.precision(3);
+  text << degenerate_ << " degenerate (" << untrusted_ << " untrusted), " << suspect_ << " suspect, " << resets_
+       << " resets, " << skipped_ << " skipped; pixels paired " << 100.0 * inlier_share_ / registered
+       << " %, moving " << 100.0 * moving_share_ / registered << " % (most " << 100.0 * most_moving_share_ << " %)";
+  return text.str();
+}
+
+std::string OdometryHealth::warning() const {
+  if (frames_ == 0) return {};
+  if (2 * degenerate_ > frames_)
+    return std::to_string(degenerate_) + " of " + std::to_string(frames_) +
+           " scans were degenerate: the trajectory is mostly the motion prior (check the sensor model against "
+           "the data, and the scene)";
+  if (2 * suspect_ > frames_)
+    return std::to_string(suspect_) + " of " + std::to_string(frames_) +
+           " scans were suspect (few pixels paired, or moving objects filling the view): check the warnings in "
+           "the frames CSV";
+  return {};
+}
+
+int reportHealth(const OdometryHealth& health) {
+  const std::string warning = health.warning();
+  if (warning.empty()) return 0;
+  const bool failed = 2 * health.degenerate() > health.frames();
+  std::cerr << (failed ? "error: " : "warning: ") << warning << "\n";
+  return failed ? 3 : 0;
+}
+
 OdometryFramesCsv::OdometryFramesCsv(const std::string& path) : path_(path), file_(path) {
   if (!file_) throw std::runtime_error("cannot write " + path);
   file_ << "frame,time_s,seconds,inliers,iterations,condition_number,residual_rms_m,degenerate,reset,"
-           "skipped,warning\n";
+           "skipped,valid_pixels,inlier_share,moving_share,prior_difference_m,prior_difference_deg,warning\n";
 }
 
 void OdometryFramesCsv::add(int frame, const registration::OdometryUpdate& update) {
@@ -136,7 +211,9 @@ void OdometryFramesCsv::add(int frame, const registration::OdometryUpdate& updat
   file_ << frame << ',' << std::setprecision(15) << double(update.stamp_ns) * 1e-9 << std::setprecision(6) << ','
         << update.seconds << ',' << update.inliers << ',' << update.iterations << ',' << update.condition_number
         << ',' << update.residual_rms_m << ',' << update.degenerate << ',' << update.reset << ','
-        << update.skipped << ',' << warning << '\n';
+        << update.skipped << ',' << update.valid_pixels << ',' << update.inlierShare() << ','
+        << update.movingShare() << ',' << update.prior_difference_m << ','
+        << update.prior_difference_rad * 180.0 / M_PI << ',' << warning << '\n';
 }
 
 void OdometryFramesCsv::close() {

@@ -37,6 +37,8 @@ struct OdometryCommandLine {
   int deskew_passes = registration::OdometryOptions().deskew_passes;
   double kernel_scale_m = 0.5;
   double max_correspondence_distance_m = registration::RegistrationOptions().max_correspondence_distance_m;
+  double moving_margin_m = registration::OdometryOptions().moving_margin_m;
+  double area_weight_max_range_m = registration::RegistrationOptions().area_weight_max_range_m;
   int model_keyframes = int(registration::LocalModelOptions().keyframes);
   double keyframe_distance_m = registration::LocalModelOptions().keyframe_distance_m;
   double keyframe_angle_deg = registration::LocalModelOptions().keyframe_angle_rad * 180.0 / M_PI;
@@ -48,6 +50,32 @@ void addOdometryOptions(Command& command, OdometryCommandLine& odometry);
 // Mapping settings on the command line (rim map, rim run), into the core's options.
 void addMapOptions(Command& command, mapping::TsdfMapOptions& map);
 Json::Value mapOptionsJson(const mapping::TsdfMapOptions& map, bool deskew);
+
+// The odometry's health over a run (rim odometry, rim run): counts and the
+// mean per-scan figures, for the summary line and the JSON report.
+class OdometryHealth {
+ public:
+  void add(const registration::OdometryUpdate& update);
+  int frames() const { return frames_; }
+  int degenerate() const { return degenerate_; }
+  int resets() const { return resets_; }
+  int skipped() const { return skipped_; }
+  Json::Value json() const;
+  // "N degenerate (U untrusted), S suspect, R resets, K skipped; pixels paired
+  // P %, moving M % (most X %)"
+  std::string line() const;
+  // A warning naming the problem when the run looks wrong ("" if not).
+  std::string warning() const;
+
+ private:
+  int frames_ = 0, registered_ = 0, degenerate_ = 0, untrusted_ = 0, suspect_ = 0, resets_ = 0, skipped_ = 0;
+  double inlier_share_ = 0.0, moving_share_ = 0.0, most_moving_share_ = 0.0, prior_difference_m_ = 0.0;
+};
+
+// Prints the health warning, if any, to stderr; the exit status: 3 when
+// most scans were degenerate (the outputs are written, but the trajectory is
+// not a measurement), else 0.
+int reportHealth(const OdometryHealth& health);
 
 // One row per odometry step: time, cost, inliers, why a scan was not used.
 class OdometryFramesCsv {

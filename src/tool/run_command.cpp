@@ -148,7 +148,8 @@ struct RunRecord {
   std::vector<FrameRecord> records;
   std::vector<double> mesh_update_ms;
   double read_seconds = 0, odometry_seconds = 0, integrate_seconds = 0, mesh_seconds = 0;
-  int frames = 0, degenerate = 0, resets = 0, skipped = 0, refused = 0;
+  int frames = 0, refused = 0;
+  OdometryHealth health;
 };
 
 // A preset is simulated into out/sequence first; anything else is read as it is.
@@ -188,9 +189,7 @@ RunRecord runScans(pipeline::ScanToMapPipeline& pipeline, const io::Recording& r
     frames_file.add(run.frames, update);
     run.odometry_seconds += result.odometry_seconds;
     run.integrate_seconds += result.integrate_seconds;
-    run.degenerate += update.degenerate;
-    run.resets += update.reset && run.frames > 0;
-    run.skipped += update.skipped;
+    run.health.add(update);
     run.refused += result.map && !result.map->integrated;
     for (const std::string& warning : result.warnings)
       if (warnings++ < 20) std::cerr << "\nwarning: frame " << run.frames << ": " << warning << "\n";
@@ -273,8 +272,8 @@ std::string plotRun(const RunRecord& run, const std::optional<GroundTruthCompari
 void printSummary(const RunRecord& run, const Json::Value& report,
                   const std::optional<GroundTruthComparison>& comparison) {
   const Json::Value& timing = report["timing"];
-  std::cout << run.frames << " scans (" << run.poses.size() << " poses, " << run.degenerate << " degenerate, "
-            << run.resets << " resets, " << run.skipped << " skipped, " << run.refused << " refused by the map)\n"
+  std::cout << run.frames << " scans (" << run.poses.size() << " poses; " << run.health.line() << "; " << run.refused
+            << " refused by the map)\n"
             << "odometry " << timing["odometry_frames_per_second"].asDouble() << " frames/s ("
             << timing["odometry_ms"]["median"].asDouble() << " ms median), mapping "
             << timing["mapping_frames_per_second"].asDouble() << " frames/s ("
@@ -344,9 +343,8 @@ int runPipeline(RunCommandOptions options, const Command& command) {
   report["frames"] = run.frames;
   report["poses"] = Json::UInt64(run.poses.size());
   report["odometry"] = options.odometry.json();
-  report["odometry"]["degenerate"] = run.degenerate;
-  report["odometry"]["resets"] = run.resets;
-  report["odometry"]["skipped"] = run.skipped;
+  const Json::Value health = run.health.json();
+  for (const std::string& key : health.getMemberNames()) report["odometry"][key] = health[key];
   report["mapping"] = mapOptionsJson(options.map, options.odometry.options().deskew);
   report["mapping"]["scans_refused"] = run.refused;
   report["mapping"]["blocks"] = Json::UInt64(statistics.blocks);
@@ -377,7 +375,7 @@ int runPipeline(RunCommandOptions options, const Command& command) {
   writeJsonFile(outputs["report_json"].asString(), written);
   printSummary(run, report, comparison);
   if (!plot_note.empty()) std::cerr << plot_note << "\n";
-  return 0;
+  return reportHealth(run.health);
 }
 
 }  // namespace

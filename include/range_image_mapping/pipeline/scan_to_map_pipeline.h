@@ -113,6 +113,7 @@ class ScanToMapPipeline {
   std::optional<Eigen::Isometry3d> last_given_pose_;
   uint64_t last_given_time_ns_ = 0;
   uint64_t last_mesh_time_ns_ = 0;
+  RangeImage without_moving_;  // the scan as mapped when the odometry found moving pixels
 };
 
 }  // namespace range_image_mapping::pipeline

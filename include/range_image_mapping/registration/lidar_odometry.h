@@ -57,6 +57,18 @@ struct OdometryOptions {
   // exp(-dt / velocity_decay_time_s), so that a long run of degenerate scans
   // comes to rest instead of carrying one velocity for ever. 0: kept as is.
   double velocity_decay_time_s = 1.0;
+  // Moving objects: after registration, a pixel whose point lies this far in
+  // front of the model's surface (along the surface normal, towards the
+  // sensor: in space the keyframes saw empty) is moving. Moving pixels are
+  // left out of keyframes, so the model (and the map, through the pipeline)
+  // keeps the static world; a scan with more than moving_warning_share of
+  // its pixels moving is reported. 0: no classification.
+  double moving_margin_m = 0.3;
+  double moving_warning_share = 0.3;
+  // A registration that pairs fewer than this share of the scan's pixels
+  // with the model is reported as suspect (the scene changed, a wrong
+  // match, the wrong sensor model).
+  double min_inlier_share = 0.2;
 };
 
 // Why a scan started a new odometry.
@@ -79,11 +91,23 @@ struct OdometryUpdate {
   Eigen::Vector3d angular_velocity = Eigen::Vector3d::Zero();  // lidar frame, rad/s
   uint64_t stamp_ns = 0;     // scan time: the pose's and the deskewed points' time
   std::size_t inliers = 0;
+  std::size_t valid_pixels = 0;  // pixels with a point and a normal (the source)
+  std::size_t moving_pixels = 0;  // of them, classified as moving
+  // How far the registration moved the scan from the motion prior's pose
+  // (the constant-velocity prediction): large where the motion changed or
+  // the registration followed something else.
+  double prior_difference_m = 0.0;
+  double prior_difference_rad = 0.0;
+  double inlierShare() const { return valid_pixels ? double(inliers) / double(valid_pixels) : 0.0; }
+  double movingShare() const { return valid_pixels ? double(moving_pixels) / double(valid_pixels) : 0.0; }
   int iterations = 0;
   double condition_number = 0.0;  // of the last hessian
   double residual_rms_m = 0.0;
   bool degenerate = false;   // the motion prior was used (degenerate or untrusted registration)
   bool limit_exceeded = false;  // ... because the registration broke a physical limit
+  // Registered, but the health figures say the pose may be wrong (few pixels
+  // paired, moving objects fill much of the scan): said in `warning`.
+  bool suspect = false;
   bool reset = false;        // this scan started a new odometry: see restart
   RestartReason restart = RestartReason::kNone;
   bool skipped = false;      // the scan was not used (empty, all invalid, same stamp)
@@ -124,6 +148,9 @@ class LidarOdometry {
   // column in the lidar frame at its own time): what the map integrates, so
   // the normals are computed once per scan for both.
   const VertexNormalMap& measuredScan() const { return measured_; }
+  // Per full-resolution pixel of the last used scan (staggered, row-major):
+  // 1 where it was classified as moving (see moving_margin_m), else 0.
+  const std::vector<uint8_t>& movingPixels() const { return moving_; }
 
  private:
   void restart(const RangeImage& scan, uint64_t stamp_ns);
@@ -132,6 +159,9 @@ class LidarOdometry {
   std::string physicalLimitBroken(const Twist& twist, double dt_s) const;
   void moveColumns(const VertexNormalMap& measured, VertexNormalMap& moved) const;
   bool provisional(const RangeImage& scan) const;
+  // Marks moving_ from deskewed_ registered at target_from_current against
+  // the rendered model; returns how many.
+  std::size_t classifyMoving(const LidarModel& model, const Eigen::Isometry3d& target_from_current);
   void addKeyframe(const RangeImage& scan, bool deskewed);
 
   OdometryOptions options_;
@@ -148,6 +178,9 @@ class LidarOdometry {
   std::vector<ColumnMotion> column_motion_;  // per column: [R | t] to the scan time
   std::vector<VertexNormalMap> rendered_;  // the model's levels at the predicted pose
   std::vector<VertexNormalMap> keyframe_levels_;
+  std::vector<uint8_t> moving_;
+  VertexNormalMap source_;  // measured_ without the last scan's moving pixels
+  const VertexNormalMap& sourceWithoutMoving();
   RangeImage staggered_;  // destaggered input, re-staggered
 };
 

@@ -38,6 +38,10 @@ struct RegistrationOptions {
   // metres apart), the fine ones reject outliers.
   bool gate_grows_with_stride = true;
   double min_normal_cosine = 0.8;           // source and target normals must agree
+  // Pairs are weighted by the area their pixel covers, range^2 up to this
+  // range (and equally beyond it): the static world, far and wide, then
+  // outweighs a near object that fills many pixels. 0: every pair alike.
+  double area_weight_max_range_m = 20.0;
   RobustKernel kernel;
   NormalMapOptions normals;
   double convergence_rotation_rad = 1e-5;   // early exit when an update is smaller
