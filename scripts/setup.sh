@@ -24,7 +24,7 @@ packages=(
   libnodeletlib-dev libnodeletlib-tools libnodelet-dev pluginlib-dev libtopic-tools-dev
   libtf2-ros-dev libtf2-eigen-dev libsensor-msgs-dev libnav-msgs-dev libvisualization-msgs-dev
   librostest-dev libgtest-dev
-  libeigen3-dev libtbb-dev libjsoncpp-dev libpcap-dev libboost-program-options-dev libpng-dev libssl-dev
+  libeigen3-dev libtbb-dev libjsoncpp-dev libyaml-cpp-dev libpcap-dev libboost-program-options-dev libpng-dev libssl-dev
   libnanoflann-dev libembree-dev robin-map-dev gnuplot-nox clang liboctomap-dev
   libstd-srvs-dev libdiagnostic-updater-dev libmessage-filters-dev libboost-dev
 )

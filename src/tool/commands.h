@@ -13,6 +13,7 @@ void addEvalCommand(Command& rim);
 void addMapCommand(Command& rim);
 void addOdometryCommand(Command& rim);
 void addRunCommand(Command& rim);
+void addSensorCommand(Command& rim);
 void addSimulateCommand(Command& rim);
 
 // rim simulate's ready-made sequences (outdoor_car, indoor_cart, ...), which

@@ -9,5 +9,6 @@ int main(int argc, char** argv) {
   range_image_mapping::tool::addOdometryCommand(rim);
   range_image_mapping::tool::addMapCommand(rim);
   range_image_mapping::tool::addRunCommand(rim);
+  range_image_mapping::tool::addSensorCommand(rim);
   return rim.main(argc, argv);
 }
