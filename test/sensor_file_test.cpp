@@ -1,6 +1,8 @@
 // Sensor files: any model round-trips through YAML, an Ouster metadata JSON
 // reads as one, and every mistake in a hand-written file is named with its
 // key (and line).
+#include "range_image_mapping/io/kitti.h"
+#include "range_image_mapping/io/recording.h"
 #include "range_image_mapping/io/sensor_file.h"
 #include "range_image_mapping/ouster_metadata.h"
 #include "test_data.h"
@@ -121,6 +123,57 @@ TEST(SensorFile, OusterMetadataIsASensorFile) {
   expectSameIntrinsics(file.intrinsics, loadOusterMetadata(path).intrinsics);
   // And through YAML unchanged.
   expectSameIntrinsics(parseSensorYaml(sensorYaml(file.intrinsics)).intrinsics, file.intrinsics);
+}
+
+// A folder of .bin clouds read through a sensor file: every point gets the
+// pixel it came from, where the synthetic HDL-64E model would lose them.
+TEST(SensorFile, RecordingProjectsKittiFoldersWithIt) {
+  LidarIntrinsics intrinsics = exampleIntrinsics();
+  intrinsics.column_window = {0, -1};
+  intrinsics.lidar_to_sensor = Eigen::Isometry3d::Identity();
+  const LidarModel model(intrinsics);
+  const std::filesystem::path folder = std::filesystem::temp_directory_path() / "rim_sensor_file_recording";
+  std::filesystem::remove_all(folder);
+  std::filesystem::create_directories(folder);
+  std::vector<Eigen::Vector3f> points;
+  for (int v = 0; v < model.rows(); ++v)
+    for (int u = 0; u < model.columns(); u += 3) points.push_back(model.unproject(u, v, 5.0f + 0.01f * v));
+  writeKittiVelodyne((folder / "000000.bin").string(), points, {});
+  writeSensorFile((folder / "sensor.yaml").string(), intrinsics);
+
+  RecordingOptions options;
+  options.input = folder.string();
+  options.kitti = true;
+  options.sensor = (folder / "sensor.yaml").string();
+  const Recording recording = openRecording(options);
+  EXPECT_EQ(recording.model->rows(), 4);
+  EXPECT_NE(recording.description.find("sensor.yaml: 4 x 2000"), std::string::npos) << recording.description;
+  std::size_t valid = 0;
+  forEachScan(recording, [&](const RangeImage& image) {
+    valid = image.validCount();
+    for (int v = 0; v < image.rows(); ++v) EXPECT_TRUE(image.valid(v, 0)) << v;
+    return true;
+  });
+  EXPECT_EQ(valid, points.size());
+
+  options.sensor.clear();  // the default stays the synthetic HDL-64E
+  EXPECT_EQ(openRecording(options).model->rows(), 64);
+  std::filesystem::remove_all(folder);
+}
+
+TEST(SensorFile, OusterCaptureRefusesASensorFile) {
+  RIM_REQUIRE_DATA(pcap, "ouster-pcaps/OS-1-32-G_v2.1.1_1024x10.pcap");
+  RIM_REQUIRE_DATA(metadata, "ouster-pcaps/OS-1-32-G_v2.1.1_1024x10.json");
+  RecordingOptions options;
+  options.input = pcap;
+  options.metadata = metadata;
+  options.sensor = metadata;
+  try {
+    openRecording(options);
+    FAIL() << "expected RecordingError";
+  } catch (const RecordingError& error) {
+    EXPECT_NE(std::string(error.what()).find("whose sensor model is its metadata"), std::string::npos) << error.what();
+  }
 }
 
 }  // namespace

@@ -3,6 +3,7 @@
 #include "range_image_mapping/io/kitti.h"
 #include "range_image_mapping/io/pcap_reader.h"
 #include "range_image_mapping/io/pose_file.h"
+#include "range_image_mapping/io/sensor_file.h"
 #include "range_image_mapping/ouster_packet.h"
 #include "range_image_mapping/point_cloud_projection.h"
 
@@ -57,13 +58,23 @@ Recording openRecording(const RecordingOptions& options) {
     if (recording.velodyne_files.empty())
       throw RecordingError("INPUT " + options.input + ": no KITTI scans (*.bin) in " + folder.string());
     if (!has_velodyne) sequence = input.parent_path();
-    recording.model = std::make_shared<const LidarModel>(kittiHdl64Intrinsics());
     recording.frame = "velodyne";
     recording.description = std::to_string(recording.velodyne_files.size()) + " KITTI scans in " + folder.string();
+    if (options.sensor.empty()) {
+      recording.model = std::make_shared<const LidarModel>(kittiHdl64Intrinsics());
+    } else {
+      const SensorFile sensor = readSensorFile(options.sensor);
+      recording.model = std::make_shared<const LidarModel>(sensor.intrinsics);
+      recording.description += " (sensor model " + options.sensor + ": " + std::to_string(sensor.intrinsics.rows) +
+                               " x " + std::to_string(sensor.intrinsics.columns) + ")";
+    }
     recording.expected_frames = int(recording.velodyne_files.size());
     if (fs::exists(sequence / "times.txt")) recording.times_s = readTimes((sequence / "times.txt").string());
   } else {
     if (options.kitti) throw RecordingError("KITTI input: INPUT " + options.input + " is not a folder");
+    if (!options.sensor.empty())
+      throw RecordingError("INPUT " + options.input + " is an Ouster capture, whose sensor model is its metadata: " +
+                           "give that with --metadata, not a sensor file (" + options.sensor + ")");
     const fs::path pcap = fs::is_directory(input) ? input / "capture.pcap" : input;
     if (!fs::exists(pcap))
       throw RecordingError("INPUT " + options.input +

@@ -32,6 +32,10 @@ struct RecordingOptions {
   std::string input;
   std::string metadata;  // Ouster metadata JSON of the pcap; "" = metadata.json in the INPUT folder
   bool kitti = false;    // read INPUT as a KITTI velodyne folder even if it holds a capture
+  // Sensor file (io/sensor_file.h: YAML, or an Ouster metadata JSON) whose
+  // model projects a KITTI folder's clouds; "" = the synthetic HDL-64E. An
+  // Ouster capture's model is its metadata's: giving one is an error.
+  std::string sensor;
   int frames = 0;        // give only the first N scans (0: all)
 };
 
@@ -70,7 +74,8 @@ Recording openRecording(const RecordingOptions& options);
 
 // Calls on_scan with each scan in order (the image is reused between calls)
 // until it returns false or `frames` scans were given; returns how many were
-// given. KITTI scans are projected with the synthetic HDL-64E model, stamped
+// given. KITTI scans are projected with the sensor file's model (default:
+// the synthetic HDL-64E model), stamped
 // from times.txt (or 10 Hz) and, in a rim simulate folder, given their column
 // times so they can be deskewed.
 std::size_t forEachScan(const Recording& recording, const std::function<bool(const RangeImage&)>& on_scan);
