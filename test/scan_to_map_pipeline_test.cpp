@@ -55,14 +55,19 @@ TEST(ScanToMapPipeline, TellsTheSameStoryAsItsPartsChainedByHand) {
     const RangeImage& scan = sequence().scans[k];
     const ScanResult result = pipeline.process(scan);
     // By hand: the first valid column's time, the odometry's pose and twist of
-    // this scan, the map's own normals.
+    // this scan, the map's own normals ...
     const uint64_t time = scanTime(scan, ScanTimeSource::kFirstValidColumn);
     const registration::OdometryUpdate update = odometry.process(scan, time);
     mapping::ScanPose pose;
     pose.world_from_lidar = update.pose;
     pose.twist << update.angular_velocity, update.linear_velocity;
     pose.scan_time_ns = time;
-    const mapping::MapUpdate map_update = map.integrate(scan, pose);
+    // ... and the scan without the pixels the odometry found moving.
+    RangeImage mapped = scan;
+    const std::vector<uint8_t>& moving = odometry.movingPixels();
+    for (std::size_t i = 0; i < moving.size(); ++i)
+      if (moving[i]) mapped.range[i] = std::numeric_limits<float>::quiet_NaN();
+    const mapping::MapUpdate map_update = map.integrate(mapped, pose);
 
     ASSERT_TRUE(result.has_pose);
     ASSERT_TRUE(result.odometry && result.map);

@@ -87,7 +87,9 @@ ScanResult ScanToMapPipeline::process(const RangeImage& scan, bool source_starte
       const std::vector<uint8_t>& moving = odometry_->movingPixels();
       for (std::size_t i = 0; i < moving.size() && i < without_moving_.range.size(); ++i)
         if (moving[i]) without_moving_.range[i] = std::numeric_limits<float>::quiet_NaN();
-      integrate(without_moving_, result, &odometry_->measuredScan());
+      // Normals of the masked scan, as a Mapper fed the Odometry's
+      // static_range_image computes them.
+      integrate(without_moving_, result, nullptr);
     } else {
       integrate(scan, result, &odometry_->measuredScan());
     }

@@ -32,6 +32,8 @@
 
 #include <boost/make_shared.hpp>
 
+#include <limits>
+
 #include <Eigen/Geometry>
 
 #include <algorithm>
@@ -108,6 +110,11 @@ class OdometryNodelet : public nodelet::Nodelet {
 
   ros::Subscriber range_image_subscriber_;
   ros::Publisher odometry_publisher_, path_publisher_, deskewed_cloud_publisher_;
+  // The range image without the pixels found moving, for the Mapper: the
+  // incoming message itself (no copy) when nothing moved.
+  ros::Publisher static_image_publisher_;
+  void publishStaticImage(const LidarRangeImage::ConstPtr& message, const RangeImage& image,
+                          const registration::OdometryUpdate& update);
   ros::ServiceServer reset_service_;
   ros::SteadyTimer statistics_timer_;
   std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
@@ -146,6 +153,7 @@ void OdometryNodelet::onInit() {
   if (parameters_.publish_tf) tf_broadcaster_ = std::make_unique<tf2_ros::TransformBroadcaster>();
 
   odometry_publisher_ = node.advertise<nav_msgs::Odometry>("odometry", 16);
+  static_image_publisher_ = node.advertise<LidarRangeImage>("static_range_image", 16);
   if (parameters_.path_length > 0) path_publisher_ = node.advertise<nav_msgs::Path>("path", 1);
   if (parameters_.publish_deskewed_cloud)
     deskewed_cloud_publisher_ = node.advertise<sensor_msgs::PointCloud2>("deskewed_cloud", 4);
@@ -236,6 +244,7 @@ void OdometryNodelet::onRangeImage(const LidarRangeImage::ConstPtr& message) {
     }
     if (!base_from_lidar) return;  // still waiting for tf
     publish(result, message->header, *base_from_lidar, step_s);
+    if (static_image_publisher_.getNumSubscribers() > 0) publishStaticImage(message, image, update);
     if (deskewed_cloud_publisher_ && deskewed_cloud_publisher_.getNumSubscribers() > 0)
       publishDeskewedCloud(message->header);
     diagnostics_->updater().update();
@@ -334,6 +343,23 @@ bool OdometryNodelet::onReset(std_srvs::Empty::Request&, std_srvs::Empty::Respon
   last_update_ = registration::OdometryUpdate();
   NODELET_INFO("odometry reset: the next scan starts at the identity");
   return true;
+}
+
+void OdometryNodelet::publishStaticImage(const LidarRangeImage::ConstPtr& message, const RangeImage& image,
+                                         const registration::OdometryUpdate& update) {
+  if (update.moving_pixels == 0) {
+    static_image_publisher_.publish(message);
+    return;
+  }
+  // The odometry's mask is per staggered pixel; the message keeps its order.
+  RangeImage staggered = image.column_order == ColumnOrder::kStaggered ? image : image.staggered();
+  const std::vector<uint8_t>& moving = pipeline_->odometry()->movingPixels();
+  if (moving.size() != staggered.range.size()) return;
+  for (std::size_t i = 0; i < moving.size(); ++i)
+    if (moving[i]) staggered.range[i] = std::numeric_limits<float>::quiet_NaN();
+  const LidarRangeImage::Ptr masked = boost::make_shared<LidarRangeImage>(*message);
+  masked->range = image.column_order == ColumnOrder::kStaggered ? staggered.range : staggered.destaggered().range;
+  static_image_publisher_.publish(masked);
 }
 
 void OdometryNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {

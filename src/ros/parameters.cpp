@@ -284,6 +284,7 @@ OdometryParameters readOdometryParameters(const ros::NodeHandle& private_node) {
   odometry.moving_margin_m = reader.getDouble("moving_margin", odometry_defaults.moving_margin_m, 0.0, 100.0);
   odometry.moving_warning_share =
       reader.getDouble("moving_warning_share", odometry_defaults.moving_warning_share, 1e-3, 1.0);
+  odometry.min_inlier_share = reader.getDouble("min_inlier_share", odometry_defaults.min_inlier_share, 0.0, 1.0);
   odometry.deskew_passes = reader.getInt("deskew_passes", odometry_defaults.deskew_passes, 0, 100);
   odometry.max_speed_mps = reader.getDouble("max_speed", odometry_defaults.max_speed_mps, 0.0, 1e3);
   odometry.max_angular_rate_radps =
