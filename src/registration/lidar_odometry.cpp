@@ -11,7 +11,6 @@
 #include <cmath>
 #include <functional>
 #include <limits>
-#include <optional>
 #include <sstream>
 
 namespace range_image_mapping::registration {
@@ -385,22 +384,35 @@ std::size_t LidarOdometry::classifyMoving(const LidarModel& model, const Eigen::
   const Eigen::Isometry3f transform = target_from_current.cast<float>();
   const float margin = float(options_.moving_margin_m);
   const std::size_t size = deskewed_.points.size();
+  constexpr std::size_t kChunk = 1024;
   return tbb::parallel_reduce(
-      tbb::blocked_range<std::size_t>(0, size, 4096), std::size_t(0),
+      tbb::blocked_range<std::size_t>(0, size, kChunk), std::size_t(0),
       [&](const tbb::blocked_range<std::size_t>& block, std::size_t count) {
-        for (std::size_t i = block.begin(); i < block.end(); ++i) {
-          if (!deskewed_.normals[i].allFinite()) continue;
-          const Eigen::Vector3f point = transform * deskewed_.points[i];
-          const std::optional<ProjectedPixel> pixel = model.project(point);
-          if (!pixel) continue;
-          const std::size_t t = levelPixelIndex(target, *pixel);
-          const Eigen::Vector3f& surface = target.points[t];
-          const Eigen::Vector3f& normal = target.normals[t];
-          if (!surface.allFinite() || !normal.allFinite()) continue;
-          // Normals face the sensor: positive is in front of the surface.
-          if (normal.dot(point - surface) > margin && point.norm() < surface.norm()) {
-            moving_[i] = 1;
-            ++count;
+        // Projected in chunks (projectMany): several times faster than one by one.
+        Eigen::Vector3f points[kChunk];
+        std::size_t pixel_of[kChunk];
+        ProjectedPixel pixels[kChunk];
+        uint8_t hits[kChunk];
+        for (std::size_t first = block.begin(); first < block.end(); first += kChunk) {
+          const std::size_t end = std::min(block.end(), first + kChunk);
+          std::size_t n = 0;
+          for (std::size_t i = first; i < end; ++i) {
+            if (!deskewed_.normals[i].allFinite()) continue;
+            points[n] = transform * deskewed_.points[i];
+            pixel_of[n++] = i;
+          }
+          model.projectMany(points, n, pixels, hits);
+          for (std::size_t k = 0; k < n; ++k) {
+            if (!hits[k]) continue;
+            const std::size_t t = levelPixelIndex(target, pixels[k]);
+            const Eigen::Vector3f& surface = target.points[t];
+            const Eigen::Vector3f& normal = target.normals[t];
+            if (!surface.allFinite() || !normal.allFinite()) continue;
+            // Normals face the sensor: positive is in front of the surface.
+            if (normal.dot(points[k] - surface) > margin && points[k].norm() < surface.norm()) {
+              moving_[pixel_of[k]] = 1;
+              ++count;
+            }
           }
         }
         return count;
