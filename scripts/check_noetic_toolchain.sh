@@ -32,6 +32,10 @@
 #    RIM_CHROOT_ALL_UNIT_TESTS=1 runs those two as well.
 # Prints the time each step took. Everything runs in a private mount
 # namespace; /proc, /sys, /dev and the binds are unmounted on exit.
+# Exit status 77 (and a message saying why) when this machine cannot host the
+# chroot at all: no mount namespace (no CAP_SYS_ADMIN) or the mirror cannot
+# be reached; .ci/run reports that as skipped. Everything after the chroot
+# exists (packages, build, demo, tests) fails with its own status.
 # Environment: RIM_CHROOT_DIR (default .noetic_chroot), RIM_CHROOT_ALL_UNIT_TESTS=1,
 # RIM_CHROOT_CTEST_ARGS (extra ctest arguments, e.g. "-R lidar_model").
 set -euo pipefail
@@ -48,6 +52,10 @@ shared=$(cd "$repository/.." && pwd -P)/shared
 # A private mount namespace: nothing mounted here is seen by (or left behind
 # on) the host, even if this script is killed.
 if [ -z "${RIM_CHROOT_NAMESPACE:-}" ]; then
+  unshare --mount true 2>/dev/null || {
+    echo "$0: cannot make a mount namespace here (needs CAP_SYS_ADMIN): no chroot check on this machine" >&2
+    exit 77
+  }
   export RIM_CHROOT_NAMESPACE=1
   exec unshare --mount --propagation private bash "$0" "$@"
 fi
@@ -99,7 +107,11 @@ if [ ! -f "$root/.rim_bootstrap_complete" ]; then
     rm -rf --one-file-system "$root"
   fi
   debootstrap --variant=minbase --include=ca-certificates "$suite" "$root" "$mirror" \
-    >"$cache/debootstrap.log" 2>&1 || { tail -n 30 "$cache/debootstrap.log"; exit 1; }
+    >"$cache/debootstrap.log" 2>&1 || {
+    tail -n 30 "$cache/debootstrap.log"
+    echo "$0: debootstrap of $suite from $mirror failed (no network, or the mirror has no $suite)" >&2
+    exit 77
+  }
   touch "$root/.rim_bootstrap_complete"
   step_done
 fi
