@@ -61,6 +61,21 @@ TEST_F(OdometryCommand, BadRequestsNameTheProblem) {
   run = rim("odometry " + path("empty") + " --out " + path("est.txt"));
   EXPECT_NE(run.exit_code, 0);
   EXPECT_NE(run.err.find("no KITTI scans"), std::string::npos) << run.err;
+  run = rim("odometry " + path("empty") + " --sensor " + path("no_such_sensor.yaml") + " --out " + path("est.txt"));
+  EXPECT_NE(run.exit_code, 0);
+  EXPECT_NE(run.err.find("no_such_sensor.yaml"), std::string::npos) << run.err;
+}
+
+// A KITTI folder read with a sensor file instead of the synthetic HDL-64E:
+// the file's model is the one the odometry gets (its rows and columns).
+TEST_F(OdometryCommand, AKittiFolderTakesASensorFile) {
+  ASSERT_EQ(rim("simulate --preset kitti_like --frames 3 --out " + path("k")).exit_code, 0);
+  std::ofstream(path("sensor.yaml")) << "rows: 2\ncolumns: 360\naltitude_deg: [-5.0, -15.0]\n";
+  const test::RunResult run =
+      rim("odometry " + path("k") + " --kitti --sensor " + path("sensor.yaml") + " --out " + path("k/est.txt"));
+  // Two beams see almost nothing of a 64-beam scan: the health says so.
+  EXPECT_NE(run.err.find("degenerate"), std::string::npos) << run.err;
+  EXPECT_NE(test::readText(path("k/est_summary.json")).find("\"frames\" : 3"), std::string::npos);
 }
 
 }  // namespace

@@ -68,6 +68,10 @@ void addRecordingOptions(Command& command, io::RecordingOptions& recording, cons
   command.option("input", recording.input, input_help).required();
   command.option("--metadata", recording.metadata, "Ouster metadata JSON of the pcap").check(existingFile());
   command.flag("--kitti", recording.kitti, "INPUT is a KITTI velodyne folder (synthetic HDL-64E model)");
+  command.option("--sensor", recording.sensor,
+                 "sensor file (YAML from rim sensor estimate, or Ouster metadata JSON) for a KITTI folder's clouds "
+                 "instead of the synthetic HDL-64E")
+      .check(existingFile());
   command.option("--frames", recording.frames, frames_help).check(positive());
 }
 
