@@ -20,12 +20,6 @@ namespace {
 
 using MovingObjects = test::RimCommandTest;
 
-std::vector<Eigen::Isometry3d> posesOf(const std::vector<io::StampedPose>& stamped) {
-  std::vector<Eigen::Isometry3d> poses;
-  for (const io::StampedPose& pose : stamped) poses.push_back(pose.pose);
-  return poses;
-}
-
 TEST_F(MovingObjects, TheStaticWorldWinsWhileTrucksKeepPaceAlongside) {
   // 2.5 s standing, then the ego car and the trucks start together.
   constexpr int kFrames = 90;
@@ -35,7 +29,7 @@ TEST_F(MovingObjects, TheStaticWorldWinsWhileTrucksKeepPaceAlongside) {
   const auto estimate = io::readKittiPosesWithTimes(path("t/est.txt"));
   const auto truth = io::readKittiPosesWithTimes(path("t/poses_kitti.txt"));
   ASSERT_EQ(estimate.size(), truth.size());
-  const auto result = evaluation::evaluateTrajectory(posesOf(estimate), posesOf(truth));
+  const auto result = evaluation::evaluateTrajectory(io::posesOf(estimate), io::posesOf(truth));
   const double travelled = (truth.back().pose.translation() - truth.front().pose.translation()).norm();
   const double estimated = (estimate.back().pose.translation() - estimate.front().pose.translation()).norm();
   std::cout << "traffic, " << kFrames << " frames: ATE " << result.absolute_translation_m.rmse << " m, travelled "

@@ -14,12 +14,6 @@ namespace {
 
 using OdometryCommand = test::RimCommandTest;
 
-std::vector<Eigen::Isometry3d> posesOf(const std::vector<io::StampedPose>& stamped) {
-  std::vector<Eigen::Isometry3d> poses;
-  for (const io::StampedPose& pose : stamped) poses.push_back(pose.pose);
-  return poses;
-}
-
 TEST_F(OdometryCommand, IndoorCartComesOutWithinTwoCentimetres) {
   ASSERT_EQ(rim("simulate --preset indoor_cart --frames 15 --out " + path("ic")).exit_code, 0);
   const test::RunResult run = rim("odometry " + path("ic") + " --kernel-scale 0.2 --out " + path("ic/est.txt"));
@@ -35,7 +29,7 @@ TEST_F(OdometryCommand, IndoorCartComesOutWithinTwoCentimetres) {
     EXPECT_NEAR(estimate[k].time_s, truth[k].time_s, 1e-6);
     EXPECT_TRUE(estimate[k].pose.isApprox(tum[k].pose, 1e-6));
   }
-  const auto result = evaluation::evaluateTrajectory(posesOf(estimate), posesOf(truth));
+  const auto result = evaluation::evaluateTrajectory(io::posesOf(estimate), io::posesOf(truth));
   EXPECT_LT(result.absolute_translation_m.maximum, 0.02);  // measured about 5 mm
   // One CSV line per scan after the header.
   std::ifstream csv(path("ic/est_frames.csv"));

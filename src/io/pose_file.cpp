@@ -268,4 +268,11 @@ std::vector<std::vector<uint64_t>> readColumnTimes(const std::string& path) {
   return scans;
 }
 
+std::vector<Eigen::Isometry3d> posesOf(const std::vector<StampedPose>& stamped) {
+  std::vector<Eigen::Isometry3d> poses;
+  poses.reserve(stamped.size());
+  for (const StampedPose& pose : stamped) poses.push_back(pose.pose);
+  return poses;
+}
+
 }  // namespace range_image_mapping::io

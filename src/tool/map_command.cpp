@@ -54,8 +54,7 @@ std::vector<Eigen::Isometry3d> loadPoses(const std::string& path) {
       // Not (well-formed) KITTI: readPoseFile names what is wrong.
     }
   }
-  std::vector<Eigen::Isometry3d> poses;
-  for (const io::StampedPose& stamped : io::readPoseFile(path)) poses.push_back(stamped.pose);
+  std::vector<Eigen::Isometry3d> poses = io::posesOf(io::readPoseFile(path));
   if (poses.empty()) throw io::PoseFileError("--poses: " + path + " holds no poses");
   return poses;
 }

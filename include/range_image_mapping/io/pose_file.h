@@ -67,6 +67,9 @@ void writeTimes(const std::string& path, const std::vector<double>& times_s);
 // (with its times file, times_path "" = the default name).
 std::vector<StampedPose> readPoseFile(const std::string& path, const std::string& times_path = "");
 
+// The poses alone, in order (for the trajectory metrics).
+std::vector<Eigen::Isometry3d> posesOf(const std::vector<StampedPose>& stamped);
+
 // The same motion for another frame rigidly attached to this one:
 // T_world_new = T_world_frame * T_frame_new, where frame_to_new maps
 // coordinates of the frame into the new frame (T_new_frame). E.g. lidar
