@@ -354,7 +354,14 @@ void OdometryNodelet::publishStaticImage(const LidarRangeImage::ConstPtr& messag
   // The odometry's mask is per staggered pixel; the message keeps its order.
   RangeImage staggered = image.column_order == ColumnOrder::kStaggered ? image : image.staggered();
   const std::vector<uint8_t>& moving = pipeline_->odometry()->movingPixels();
-  if (moving.size() != staggered.range.size()) return;
+  if (moving.size() != staggered.range.size()) {
+    // Never leave the Mapper without the scan: mapped as it came, and said.
+    if (error_log_.allow(parameters_.statistics_period_s))
+      NODELET_WARN("moving-pixel mask of %zu pixels for a %zu-pixel image: scan passed to the Mapper unmasked",
+                   moving.size(), staggered.range.size());
+    static_image_publisher_.publish(message);
+    return;
+  }
   for (std::size_t i = 0; i < moving.size(); ++i)
     if (moving[i]) staggered.range[i] = std::numeric_limits<float>::quiet_NaN();
   const LidarRangeImage::Ptr masked = boost::make_shared<LidarRangeImage>(*message);
