@@ -2,13 +2,19 @@
 // inside (every wall, floor and ceiling normal is known exactly) and a panel
 // in front of a far wall (a depth edge).
 #include "range_image_mapping/normal_map.h"
+#include "range_image_mapping/io/kitti.h"
+#include "range_image_mapping/point_cloud_projection.h"
+#include "test_data.h"
 #include "range_image_mapping/simulation/lidar_simulator.h"
 #include "range_image_mapping/simulation/mesh_primitives.h"
 #include "range_image_mapping/simulation/sensor_presets.h"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <vector>
 
 namespace range_image_mapping {
 namespace {
@@ -174,6 +180,60 @@ TEST(NormalMap, AllInvalidImageGivesNoPointsAndNoNormals) {
     ASSERT_FALSE(std::isfinite(map.points[i].x()));
     ASSERT_FALSE(std::isfinite(map.normals[i].x()));
   }
+}
+
+// Share of the pixels with a point that also have a normal, and the median
+// angle between up and the normals of the ground within 15 m (the road
+// around the KITTI car, about 1.7 m below the Velodyne).
+struct NormalCoverage {
+  double share = 0.0;
+  double ground_median_deg = 180.0;
+};
+NormalCoverage normalCoverage(const VertexNormalMap& map) {
+  std::size_t points = 0, normals = 0;
+  std::vector<double> ground_deg;
+  for (std::size_t i = 0; i < map.points.size(); ++i) {
+    if (!std::isfinite(map.points[i].x())) continue;
+    ++points;
+    if (!std::isfinite(map.normals[i].x())) continue;
+    ++normals;
+    const Eigen::Vector3f& p = map.points[i];
+    if (p.z() < -1.4f && p.z() > -2.0f && p.head<2>().norm() < 15.0f)
+      ground_deg.push_back(std::acos(std::min(1.0f, map.normals[i].z())) / kDegree);
+  }
+  NormalCoverage coverage;
+  if (points) coverage.share = double(normals) / double(points);
+  if (!ground_deg.empty()) {
+    std::nth_element(ground_deg.begin(), ground_deg.begin() + ground_deg.size() / 2, ground_deg.end());
+    coverage.ground_median_deg = ground_deg[ground_deg.size() / 2];
+  }
+  return coverage;
+}
+
+// A model with more columns than the sensor fills per scan (as an estimated
+// model that keeps the points of lasers firing between steps): a real KITTI
+// scan at 4096 columns leaves most pixels of a row with empty neighbours,
+// yet its pixels get normals about as often as at 2048, and right ones.
+TEST(NormalMap, RealScanWithEmptyNeighbourColumnsKeepsItsNormals) {
+  RIM_REQUIRE_DATA(scan_path, "kitti00/velodyne/000094.bin");
+  const PointCloudInput cloud = io::readKittiVelodyne(scan_path);
+  NormalCoverage coverage[2];
+  int columns[2] = {2048, 4096};
+  for (int k = 0; k < 2; ++k) {
+    const auto model = std::make_shared<const LidarModel>(io::kittiHdl64Intrinsics(columns[k]));
+    VertexNormalMap map;
+    computeVertexNormalMap(projectPointCloud(cloud, model), 1, {}, map);
+    coverage[k] = normalCoverage(map);
+    std::printf("%d columns: normals for %.3f of the points, ground normals %.2f deg from up (median)\n",
+                columns[k], coverage[k].share, coverage[k].ground_median_deg);
+  }
+  // The synthetic model's evenly spread rows are not KITTI's beams, so the
+  // road's normals tilt by a few degrees; no worse with the wider reach.
+  EXPECT_LT(coverage[0].ground_median_deg, 8.0);
+  EXPECT_LT(coverage[1].ground_median_deg, coverage[0].ground_median_deg + 2.0);
+  EXPECT_GT(coverage[0].share, 0.8);
+  EXPECT_GT(coverage[1].share, 0.9 * coverage[0].share)
+      << "normals for " << coverage[1].share << " of the points at 4096 columns, " << coverage[0].share << " at 2048";
 }
 
 // levelPixelIndex shifts for power-of-two strides and divides otherwise;

@@ -95,7 +95,7 @@ void crossProductNormalsOfRow(const LevelNeighbourhood& level, int row, Eigen::V
     neighbour.shift = row_step == 0 ? 0 : level.alignedColumn(row, row_step, 0);
     return neighbour;
   };
-  const Row centre_row = rowAt(0), above = rowAt(-1), below = rowAt(1);
+  const Row centre_row = rowAt(0), above = rowAt(-1), below = rowAt(1), above2 = rowAt(-2), below2 = rowAt(2);
   for (int column = 0; column < columns; ++column) {
     const float centre_range = centre_row.ranges[std::ptrdiff_t(column) * range_step];
     if (!isValidRange(centre_range)) {
@@ -105,12 +105,13 @@ void crossProductNormalsOfRow(const LevelNeighbourhood& level, int row, Eigen::V
     // LevelNeighbourhood::neighbour at one pixel's distance, from the cached
     // rows: the point, or null when missing; false across a depth discontinuity.
     const float max_jump = level.jump_per_pixel * centre_range;
-    const auto neighbour = [&](const Row& at, int neighbour_column, const Eigen::Vector3f*& point) {
+    const auto neighbour = [&](const Row& at, int neighbour_column, const Eigen::Vector3f*& point,
+                               int pixel_distance = 1) {
       point = nullptr;
       if (!at.ranges) return true;
       neighbour_column = level.wrapColumn(neighbour_column + at.shift);
       const std::ptrdiff_t kind = LevelNeighbourhood::classify(
-          at.ranges[std::ptrdiff_t(neighbour_column) * range_step], centre_range, max_jump);
+          at.ranges[std::ptrdiff_t(neighbour_column) * range_step], centre_range, max_jump * pixel_distance);
       if (kind == LevelNeighbourhood::kAcrossEdge) return false;
       if (kind == 0) point = at.points + neighbour_column;
       return true;
@@ -129,9 +130,20 @@ void crossProductNormalsOfRow(const LevelNeighbourhood& level, int row, Eigen::V
     };
     const Eigen::Vector3f *right, *left, *down, *up;
     Eigen::Vector3f along_row, along_column;
+    // Where both neighbours along an axis are missing, the next ones out: a
+    // model with more columns or rows than the sensor fills every scan (an
+    // estimated model that keeps the points of beams firing between steps)
+    // leaves every other pixel of a row empty.
+    const auto farNeighbours = [&](const Row& after_row, int after_column, const Row& before_row,
+                                   int before_column, const Eigen::Vector3f*& after,
+                                   const Eigen::Vector3f*& before) {
+      if (after || before) return true;
+      return neighbour(after_row, after_column, after, 2) && neighbour(before_row, before_column, before, 2);
+    };
     if (!neighbour(centre_row, column + 1, right) || !neighbour(centre_row, column - 1, left) ||
+        !farNeighbours(centre_row, column + 2, centre_row, column - 2, right, left) ||
         !tangentOf(right, left, along_row) || !neighbour(below, column, down) || !neighbour(above, column, up) ||
-        !tangentOf(down, up, along_column)) {
+        !farNeighbours(below2, column, above2, column, down, up) || !tangentOf(down, up, along_column)) {
       normals[column] = kInvalid;
       continue;
     }
@@ -237,7 +249,8 @@ void computeVertexNormalMap(const RangeImage& image, int stride, const NormalMap
     const double turn = std::remainder(azimuthOfRow(row) - first_azimuth, 2.0 * M_PI);
     row_azimuth_columns[row] = float(turn * image.columns() / (2.0 * M_PI));
   }
-  const int radius = options.method == NormalMethod::kCrossProduct ? 1 : options.window_radius;
+  // The cross product reaches two rows out where the next row is empty.
+  const int radius = options.method == NormalMethod::kCrossProduct ? 2 : options.window_radius;
   std::vector<int> row_shifts(std::size_t(out.rows) * (2 * radius + 1), 0);
   for (int row = 0; row < out.rows; ++row) {
     for (int step = -radius; step <= radius; ++step) {
