@@ -41,7 +41,7 @@ struct RegistrationOptions {
   // Pairs are weighted by the area their pixel covers, range^2 up to this
   // range (and equally beyond it): the static world, far and wide, then
   // outweighs a near object that fills many pixels. 0: every pair alike.
-  double area_weight_max_range_m = 20.0;
+  double area_weight_max_range_m = 25.0;
   RobustKernel kernel;
   NormalMapOptions normals;
   double convergence_rotation_rad = 1e-5;   // early exit when an update is smaller
