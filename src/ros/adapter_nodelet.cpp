@@ -496,6 +496,9 @@ void AdapterNodelet::onPointCloud(const sensor_msgs::PointCloud2::ConstPtr& mess
     fromPointCloud2(*message, cloud_input_);
     ++clouds_;
     std_msgs::Header header = message->header;
+    // The scan time is the points' own (the earliest point's time) where the
+    // cloud has per-point times: drivers stamp headers with jitter.
+    header.stamp.fromNSec(cloud_input_.stamp_ns);
     checkCloudStream(cloud_input_, header.frame_id);
     if (header.frame_id.empty()) header.frame_id = parameters_.lidar_frame;
     if (parameters_.cloud_intrinsics == CloudIntrinsicsSource::kOuster &&
