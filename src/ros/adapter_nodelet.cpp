@@ -224,6 +224,7 @@ class AdapterNodelet : public nodelet::Nodelet {
   CloudGapCounter cloud_gaps_;
   std::size_t logged_missing_clouds_ = 0;
   bool column_order_checked_ = false;
+  bool rings_checked_ = false;
   ColumnOrder organized_column_order_ = ColumnOrder::kDestaggered;  // the setting, or the data's when they differ
   ProjectionStatistics fit_check_statistics_;  // the first clouds of a model, for one check of the fit
   std::size_t fit_check_clouds_ = 0;
@@ -529,6 +530,18 @@ void AdapterNodelet::onPointCloud(const sensor_msgs::PointCloud2::ConstPtr& mess
 }
 
 void AdapterNodelet::projectAndPublish(PointCloudInput& cloud, const std_msgs::Header& header) {
+  // A ring field says how many beams the sensor has: a model with another
+  // row count is another sensor (a VLP-32C read as a VLP-16).
+  if (!rings_checked_ && !cloud.ring.empty() && ring_to_row_.empty()) {
+    rings_checked_ = true;
+    const int rings = *std::max_element(cloud.ring.begin(), cloud.ring.end()) + 1;
+    if (rings != cloud_model_->rows())
+      warnSetting("rings", "clouds on " + input_subscriber_.getTopic() + " carry " + std::to_string(rings) +
+                               " rings but the sensor model (" + cloud_model_->intrinsics().sensor_model +
+                               ") has " + std::to_string(cloud_model_->rows()) + " rows: set parameter " +
+                               getPrivateNodeHandle().resolveName("sensor") + " to the " + std::to_string(rings) +
+                               "-beam sensor, or leave it out to estimate the model from the clouds");
+  }
   if (!column_order_checked_ && cloud.isOrganized()) {
     column_order_checked_ = true;
     const std::optional<ColumnOrder> found = detectOrganizedColumnOrder(cloud, *cloud_model_);

@@ -4,9 +4,11 @@
 // missing from the stream (gaps in the stamps), a model that explains too few
 // points, and organized clouds whose column order is not organized_columns
 // each get their warning naming the parameter; NaN no-return points are not
-// counted as drops. Adapters are loaded in this process (as a manager would).
+// counted as drops; a ring field with more rings than the model's rows is
+// warned. Adapters are loaded in this process (as a manager would).
 #include "range_image_mapping/LidarRangeImage.h"
 #include "range_image_mapping/ouster_metadata.h"
+#include "range_image_mapping/ros/bag_writer.h"
 #include "range_image_mapping/ros/range_image_conversions.h"
 #include "range_image_mapping/sensor_catalog.h"
 #include "range_image_mapping/simulation/sensor_presets.h"
@@ -201,6 +203,26 @@ TEST_F(AdapterWarningsTest, ModelThatExplainsTooLittleIsWarnedNamingTheParameter
   EXPECT_NE(fit[0].find("check parameter /wrong/adapter/sensor (VLP-16)"), std::string::npos) << fit[0];
   EXPECT_TRUE(log_.matching(log_.warnings, "sensor_frame").empty()) << "the clouds' frame is sensor_frame";
   EXPECT_EQ(diagnosticsWith("/wrong", "warning: model fit").count("warning: model fit"), 1u);
+}
+
+// A ring field with more rings than the model has rows: another sensor.
+TEST_F(AdapterWarningsTest, RingCountAgainstTheModelsRows) {
+  load("/rings", {{"sensor", "VLP-16"}, {"sensor_frame", "velodyne"}});
+  const auto vlp32c = std::make_shared<const LidarModel>(*catalogSensor("VLP-32C"));
+  RangeImage image(vlp32c);
+  std::mt19937 random(5);
+  std::uniform_real_distribution<float> range(2.0f, 40.0f);
+  for (float& value : image.range) value = range(random);
+  image.stamp_ns = 400'000'000'000ull;
+  sensor_msgs::PointCloud2 cloud;
+  rangeImageToPointCloud2(image, CloudLayout::kVelodyne, "velodyne", cloud);  // ring 0..31
+  publish("/rings", cloud);
+  ASSERT_TRUE(test::spinUntil([&] { return !images_["/rings"].empty(); }, 20.0));
+  const auto rings = log_.matching(log_.warnings, "carry 32 rings but the sensor model (VLP-16) has 16 rows");
+  ASSERT_EQ(rings.size(), 1u);
+  EXPECT_NE(rings[0].find("set parameter /rings/adapter/sensor to the 32-beam sensor"), std::string::npos)
+      << rings[0];
+  EXPECT_EQ(diagnosticsWith("/rings", "warning: rings").count("warning: rings"), 1u);
 }
 
 TEST_F(AdapterWarningsTest, StaggeredOrganizedCloudsContradictOrganizedColumns) {
