@@ -11,6 +11,7 @@
 #include "range_image_mapping/ros/bag_writer.h"
 #include "range_image_mapping/ros/range_image_conversions.h"
 #include "range_image_mapping/sensor_catalog.h"
+#include "named_sensor_image.h"
 #include "rostest_main.h"
 #include "spin_until.h"
 #include "test_data.h"
@@ -20,25 +21,11 @@
 #include <ros/ros.h>
 
 #include <map>
-#include <random>
 
 namespace range_image_mapping {
 namespace {
 
-// A staggered image of a named model: every pixel at a random range but every
-// 11th (no return), columns 100 ms / W apart from stamp_ns.
-RangeImage namedSensorImage(const std::string& name, uint64_t stamp_ns) {
-  RangeImage image(std::make_shared<const LidarModel>(*catalogSensor(name)));
-  std::mt19937 random(3);
-  std::uniform_real_distribution<float> range(2.0f, 40.0f);
-  for (std::size_t i = 0; i < image.range.size(); ++i)
-    if (i % 11 != 5) image.range[i] = range(random);
-  image.stamp_ns = stamp_ns;
-  image.column_timestamp_ns.resize(image.columns());
-  for (int u = 0; u < image.columns(); ++u)
-    image.column_timestamp_ns[u] = stamp_ns + uint64_t(u) * 100'000'000 / uint64_t(image.columns());
-  return image;
-}
+using test::namedSensorImage;
 
 class DriverCloudsTest : public ::testing::Test {
  protected:
