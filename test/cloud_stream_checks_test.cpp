@@ -38,7 +38,20 @@ TEST(CloudGapCounter, JitterIsNoGapAndThePeriodFollowsTheSensor) {
     EXPECT_EQ(gaps.add(stamp), 0u);
   }
   EXPECT_NEAR(gaps.periodSeconds(), 0.05, 0.011);
+  EXPECT_EQ(gaps.early(), 0u);
   EXPECT_EQ(gaps.add(stamp + 100 * kMs), 1u);
+}
+
+// Stamps 2-3 ms apart in a 10 Hz stream (a driver stamping with the receive
+// time): early clouds, counted, and no missing ones.
+TEST(CloudGapCounter, CountsCloudsStampedFarTooEarly) {
+  CloudGapCounter gaps;
+  uint64_t stamp = 0;
+  for (int i = 0; i < 5; ++i) gaps.add(stamp += 100 * kMs);
+  EXPECT_EQ(gaps.add(stamp += 3 * kMs), 0u);
+  EXPECT_EQ(gaps.add(stamp += 2 * kMs), 0u);
+  EXPECT_EQ(gaps.early(), 2u);
+  EXPECT_EQ(gaps.missing(), 0u);
 }
 
 // The lb_n3 capture's first scan as an organized cloud in lidar-frame x, y, z,

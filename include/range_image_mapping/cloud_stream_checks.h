@@ -22,6 +22,10 @@ class CloudGapCounter {
   // The clouds missing just before this one.
   std::size_t add(uint64_t stamp_ns);
   std::size_t missing() const { return missing_; }
+  // Clouds stamped less than half a period after the previous one: stamps
+  // that jitter (a driver stamping with the receive time, e.g. ouster-ros
+  // timestamp_mode TIME_FROM_ROS_TIME), not the sensor's rate.
+  std::size_t early() const { return early_; }
   // Median of the recent gaps; 0 until three gaps were seen.
   double periodSeconds() const;
 
@@ -31,6 +35,7 @@ class CloudGapCounter {
   uint64_t last_stamp_ns_ = 0;
   bool has_last_ = false;
   std::size_t missing_ = 0;
+  std::size_t early_ = 0;
 };
 
 // Which column order an organized cloud of the model's H x W has, from its

@@ -630,6 +630,12 @@ void AdapterNodelet::checkCloudStream(const PointCloudInput& cloud, const std::s
                                     parameters_.lidar_frame + "'): set sensor_frame:=" + frame_id +
                                     " (a launch argument) so that tf lookups use the clouds' frame");
   cloud_gaps_.add(cloud.stamp_ns);
+  if (cloud_gaps_.early() > 0)
+    warnSetting("stamps", "clouds on " + input_subscriber_.getTopic() + " are stamped less than half a period (" +
+                              std::to_string(cloud_gaps_.periodSeconds()) +
+                              " s) after the previous one: the driver stamps with jitter, e.g. the receive time "
+                              "(ouster-ros timestamp_mode TIME_FROM_ROS_TIME): stamp with the sensor's clock "
+                              "(TIME_FROM_INTERNAL_OSC, or PTP), or clouds with absolute per-point times");
 }
 
 void AdapterNodelet::warnSetting(const std::string& key, const std::string& message) {

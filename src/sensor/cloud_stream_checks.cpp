@@ -17,6 +17,7 @@ std::size_t CloudGapCounter::add(uint64_t stamp_ns) {
   if (has_last_) {
     const double gap_s = double(stamp_ns - last_stamp_ns_) * 1e-9;
     const double period_s = periodSeconds();
+    if (period_s > 0.0 && gap_s < 0.5 * period_s) ++early_;
     if (period_s > 0.0 && gap_s > 1.5 * period_s)
       missing_here = std::max<std::size_t>(1, static_cast<std::size_t>(std::lround(gap_s / period_s)) - 1);
     else {

@@ -205,6 +205,19 @@ TEST_F(AdapterWarningsTest, ModelThatExplainsTooLittleIsWarnedNamingTheParameter
   EXPECT_EQ(diagnosticsWith("/wrong", "warning: model fit").count("warning: model fit"), 1u);
 }
 
+// Stamps 2 ms apart in a 10 Hz stream: a driver stamping with jitter.
+TEST_F(AdapterWarningsTest, StampsFarCloserThanThePeriod) {
+  load("/jitter", {{"sensor", "VLP-16"}, {"sensor_frame", "velodyne"}});
+  const LidarModel vlp16(*catalogSensor("VLP-16"));
+  const double stamps[] = {500.0, 500.1, 500.2, 500.3, 500.302};
+  for (int i = 0; i < 5; ++i) publish("/jitter", plainCloud(vlp16, i + 1, stamps[i], "velodyne"));
+  ASSERT_TRUE(test::spinUntil([&] { return images_["/jitter"].size() >= 5; }, 20.0));
+  const auto jitter = log_.matching(log_.warnings, "are stamped less than half a period");
+  ASSERT_EQ(jitter.size(), 1u);
+  EXPECT_NE(jitter[0].find("TIME_FROM_ROS_TIME"), std::string::npos) << jitter[0];
+  EXPECT_EQ(diagnosticsWith("/jitter", "warning: stamps").count("warning: stamps"), 1u);
+}
+
 // A ring field with more rings than the model has rows: another sensor.
 TEST_F(AdapterWarningsTest, RingCountAgainstTheModelsRows) {
   load("/rings", {{"sensor", "VLP-16"}, {"sensor_frame", "velodyne"}});
