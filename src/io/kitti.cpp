@@ -134,12 +134,4 @@ std::vector<Eigen::Isometry3d> velodynePosesFromCameraPoses(
   return velodyne_poses;
 }
 
-LidarIntrinsics kittiHdl64Intrinsics(int columns) {
-  constexpr double kDegree = M_PI / 180.0;
-  LidarIntrinsics intrinsics =
-      LidarIntrinsics::synthetic(64, columns, 3.0 * kDegree, -25.0 * kDegree);
-  intrinsics.sensor_model = "HDL-64E (synthetic)";
-  return intrinsics;
-}
-
 }  // namespace range_image_mapping::io

@@ -1,10 +1,12 @@
 #include "range_image_mapping/io/sensor_file.h"
 
 #include "range_image_mapping/ouster_metadata.h"
+#include "range_image_mapping/sensor_catalog.h"
 
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <iomanip>
 #include <set>
@@ -144,6 +146,12 @@ SensorFile parseSensorYaml(const std::string& text, const std::string& source) {
 }
 
 SensorFile readSensorFile(const std::string& path) {
+  // A file of that name wins over a catalog name (a sensor file may be called VLP-16).
+  if (!std::filesystem::exists(path)) {
+    if (std::optional<LidarIntrinsics> named = catalogSensor(path)) return {std::move(*named), {}};
+    fail(path, "is neither a sensor file (no such file) nor a named sensor model (known: " + sensorCatalogNames() +
+                   ")");
+  }
   std::ifstream stream(path, std::ios::binary);
   if (!stream) fail(path, "cannot be read");
   std::stringstream text;

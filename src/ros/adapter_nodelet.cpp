@@ -4,13 +4,19 @@
 // so the members need no locks. Nothing thrown by bad input leaves a callback:
 // it is counted, logged (throttled) and the next message is processed.
 #include "range_image_mapping/LidarRangeImage.h"
+#include "range_image_mapping/cloud_stream_checks.h"
+#include "range_image_mapping/io/sensor_file.h"
 #include "range_image_mapping/ouster_metadata.h"
 #include "range_image_mapping/ouster_packet.h"
 #include "range_image_mapping/point_cloud_projection.h"
 #include "range_image_mapping/ros/parameters.h"
 #include "range_image_mapping/ros/steady_throttle.h"
 #include "range_image_mapping/ros/range_image_conversions.h"
+#include "range_image_mapping/ros/wall_clock_diagnostics.h"
 #include "range_image_mapping/scan_batcher.h"
+#include "range_image_mapping/sensor_catalog.h"
+#include "range_image_mapping/sensor_model_estimation.h"
+#include "range_image_mapping/sensor_model_report.h"
 
 #include <geometry_msgs/TransformStamped.h>
 #include <nodelet/nodelet.h>
@@ -29,6 +35,7 @@
 #include <algorithm>
 #include <cmath>
 #include <deque>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -89,10 +96,21 @@ void toDisplayImage(const RangeImage& image, const std_msgs::Header& header, sen
 }
 
 // The sensor model of PointCloud2 input, fixed by the parameters (nullptr
-// with intrinsics ring: it comes from the first cloud that has every ring).
-// Throws ParameterError naming the parameter that gives no model.
-LidarModelConstPtr cloudModel(const AdapterParameters& parameters, const ros::NodeHandle& private_node) {
+// with intrinsics ring or estimate: it comes from the first clouds), and the
+// sensor file's ring map. Throws ParameterError naming the parameter that
+// gives no model.
+LidarModelConstPtr cloudModel(const AdapterParameters& parameters, const ros::NodeHandle& private_node,
+                              std::vector<int>& ring_to_row) {
   switch (parameters.cloud_intrinsics) {
+    case CloudIntrinsicsSource::kSensor:
+      try {
+        io::SensorFile sensor = io::readSensorFile(parameters.sensor);
+        ring_to_row = std::move(sensor.ring_to_row);
+        return std::make_shared<const LidarModel>(std::move(sensor.intrinsics));
+      } catch (const std::exception& error) {
+        throw ParameterError("parameter " + private_node.resolveName("sensor") + " ('" + parameters.sensor +
+                             "') gives no sensor model: " + error.what());
+      }
     case CloudIntrinsicsSource::kSynthetic:
       try {
         return std::make_shared<const LidarModel>(
@@ -110,6 +128,7 @@ LidarModelConstPtr cloudModel(const AdapterParameters& parameters, const ros::No
                              parameters.metadata_file + "') gives no sensor model: " + error.what());
       }
     case CloudIntrinsicsSource::kRing:
+    case CloudIntrinsicsSource::kEstimate:
       break;
   }
   return nullptr;
@@ -137,6 +156,15 @@ class AdapterNodelet : public nodelet::Nodelet {
   void startPointCloudInput();
   void onPointCloud(const sensor_msgs::PointCloud2::ConstPtr& message);
   void transformSensorFrameToLidarFrame(PointCloudInput& cloud) const;
+  // The clouds' own checks: frame, missing clouds, column order. Once per problem.
+  void checkCloudStream(const PointCloudInput& cloud, const std::string& frame_id);
+  // intrinsics estimate: true once the model is estimated from the clouds held.
+  bool estimateCloudModel(const PointCloudInput& cloud, const std_msgs::Header& header);
+  void projectAndPublish(PointCloudInput& cloud, const std_msgs::Header& header);
+  void checkModelFit(const ProjectionStatistics& statistics);
+  // A setting that contradicts the data: logged once, kept for diagnostics.
+  void warnSetting(const std::string& key, const std::string& message);
+  void diagnoseClouds(diagnostic_updater::DiagnosticStatusWrapper& status);
 
   void publish(const RangeImage& image, const std_msgs::Header& header);
   void publishStaticTransform(const LidarIntrinsics& intrinsics);
@@ -186,7 +214,23 @@ class AdapterNodelet : public nodelet::Nodelet {
   // PointCloud2 state.
   PointCloudInput cloud_input_;  // reused per cloud
   LidarModelConstPtr cloud_model_;
-  std::vector<int> ring_to_row_;  // intrinsics: ring only
+  std::vector<int> ring_to_row_;  // intrinsics ring, or a sensor file's
+  // intrinsics estimate: the first clouds, held until the model is estimated from them.
+  struct HeldCloud {
+    PointCloudInput cloud;
+    std_msgs::Header header;
+  };
+  std::vector<HeldCloud> held_clouds_;
+  CloudGapCounter cloud_gaps_;
+  std::size_t logged_missing_clouds_ = 0;
+  bool column_order_checked_ = false;
+  bool rings_checked_ = false;
+  ColumnOrder organized_column_order_ = ColumnOrder::kDestaggered;  // the setting, or the data's when they differ
+  ProjectionStatistics fit_check_statistics_;  // the first clouds of a model, for one check of the fit
+  std::size_t fit_check_clouds_ = 0;
+  std::size_t clouds_ = 0;
+  std::map<std::string, std::string> setting_warnings_;
+  std::unique_ptr<WallClockDiagnostics> diagnostics_;
 
   // Counters for the throttled summaries.
   BatcherStatistics retired_batcher_statistics_;  // of batchers replaced by new metadata
@@ -203,7 +247,8 @@ void AdapterNodelet::onInit() {
   ros::NodeHandle& node = getNodeHandle();
   startOrRefuseLoad(getName(), "Adapter", [&] {
     parameters_ = readAdapterParameters(getPrivateNodeHandle());
-    if (parameters_.input == AdapterInput::kPointCloud) cloud_model_ = cloudModel(parameters_, getPrivateNodeHandle());
+    if (parameters_.input == AdapterInput::kPointCloud)
+      cloud_model_ = cloudModel(parameters_, getPrivateNodeHandle(), ring_to_row_);
   });
   range_image_publisher_ = node.advertise<LidarRangeImage>("range_image", 4);
   if (parameters_.publish_cloud) cloud_publisher_ = node.advertise<sensor_msgs::PointCloud2>("cloud", 4);
@@ -426,10 +471,18 @@ void AdapterNodelet::onIdleCheck(const ros::SteadyTimerEvent&) {
 void AdapterNodelet::startPointCloudInput() {
   if (parameters_.cloud_intrinsics == CloudIntrinsicsSource::kOuster)
     publishStaticTransform(cloud_model_->intrinsics());
+  organized_column_order_ = parameters_.organized_column_order;
+  diagnostics_ = std::make_unique<WallClockDiagnostics>(getNodeHandle(), getPrivateNodeHandle(), getName(),
+                                                        "lidar_adapter");
+  diagnostics_->updater().add("point clouds", this, &AdapterNodelet::diagnoseClouds);
   input_subscriber_ = getNodeHandle().subscribe("points", parameters_.cloud_queue_size,
                                                 &AdapterNodelet::onPointCloud, this);
-  NODELET_INFO("Adapter: PointCloud2 from %s, range images on %s", input_subscriber_.getTopic().c_str(),
-               range_image_publisher_.getTopic().c_str());
+  std::string model = "estimated from the first " + std::to_string(parameters_.estimate_clouds) + " clouds";
+  if (parameters_.cloud_intrinsics == CloudIntrinsicsSource::kRing) model = "from the first cloud's ring field";
+  if (cloud_model_)
+    model = cloud_model_->intrinsics().sensor_model + ", " + describeSensorModel(cloud_model_->intrinsics());
+  NODELET_INFO("Adapter: PointCloud2 from %s, range images on %s; sensor model %s",
+               input_subscriber_.getTopic().c_str(), range_image_publisher_.getTopic().c_str(), model.c_str());
 }
 
 // The Ouster driver publishes its clouds in the sensor frame; the model's
@@ -442,32 +495,175 @@ void AdapterNodelet::transformSensorFrameToLidarFrame(PointCloudInput& cloud) co
 void AdapterNodelet::onPointCloud(const sensor_msgs::PointCloud2::ConstPtr& message) {
   try {
     fromPointCloud2(*message, cloud_input_);
-    cloud_input_.organized_column_order = parameters_.organized_column_order;
+    ++clouds_;
     std_msgs::Header header = message->header;
+    // The scan time is the points' own (the earliest point's time) where the
+    // cloud has per-point times: drivers stamp headers with jitter.
+    header.stamp.fromNSec(cloud_input_.stamp_ns);
+    checkCloudStream(cloud_input_, header.frame_id);
     if (header.frame_id.empty()) header.frame_id = parameters_.lidar_frame;
     if (parameters_.cloud_intrinsics == CloudIntrinsicsSource::kOuster &&
         header.frame_id == parameters_.sensor_frame) {
       transformSensorFrameToLidarFrame(cloud_input_);
       header.frame_id = parameters_.lidar_frame;
     }
-    if (!cloud_model_) {
+    if (!cloud_model_ && parameters_.cloud_intrinsics == CloudIntrinsicsSource::kRing) {
       RingIntrinsics ring_intrinsics = intrinsicsFromRings(cloud_input_, parameters_.columns);
       cloud_model_ = std::make_shared<const LidarModel>(std::move(ring_intrinsics.intrinsics));
       ring_to_row_ = std::move(ring_intrinsics.ring_to_row);
       NODELET_INFO("ring intrinsics from the cloud on %s: %d rings x %d columns",
                    input_subscriber_.getTopic().c_str(), cloud_model_->rows(), cloud_model_->columns());
     }
-    ProjectionStatistics statistics;
-    const RangeImage image = ring_to_row_.empty()
-                                 ? projectPointCloud(cloud_input_, cloud_model_, &statistics)
-                                 : projectPointCloud(cloud_input_, cloud_model_, ring_to_row_, &statistics);
-    accumulate(projection_statistics_, statistics);
-    publish(image, header);
+    if (!cloud_model_) {
+      if (!estimateCloudModel(cloud_input_, header)) return;
+      std::vector<HeldCloud> held;
+      held.swap(held_clouds_);
+      for (HeldCloud& cloud : held) projectAndPublish(cloud.cloud, cloud.header);
+      return;
+    }
+    projectAndPublish(cloud_input_, header);
   } catch (const std::exception& error) {
     ++drops_.rejected_clouds;
     if (cloud_error_log_.allow(parameters_.statistics_period_s))
       NODELET_ERROR("PointCloud2 on %s dropped: %s", input_subscriber_.getTopic().c_str(), error.what());
   }
+}
+
+void AdapterNodelet::projectAndPublish(PointCloudInput& cloud, const std_msgs::Header& header) {
+  // A ring field says how many beams the sensor has: a model with another
+  // row count is another sensor (a VLP-32C read as a VLP-16).
+  if (!rings_checked_ && !cloud.ring.empty() && ring_to_row_.empty()) {
+    rings_checked_ = true;
+    const int rings = *std::max_element(cloud.ring.begin(), cloud.ring.end()) + 1;
+    if (rings != cloud_model_->rows())
+      warnSetting("rings", "clouds on " + input_subscriber_.getTopic() + " carry " + std::to_string(rings) +
+                               " rings but the sensor model (" + cloud_model_->intrinsics().sensor_model +
+                               ") has " + std::to_string(cloud_model_->rows()) + " rows: set parameter " +
+                               getPrivateNodeHandle().resolveName("sensor") + " to the " + std::to_string(rings) +
+                               "-beam sensor, or leave it out to estimate the model from the clouds");
+  }
+  if (!column_order_checked_ && cloud.isOrganized()) {
+    column_order_checked_ = true;
+    const std::optional<ColumnOrder> found = detectOrganizedColumnOrder(cloud, *cloud_model_);
+    const auto name = [](ColumnOrder order) { return order == ColumnOrder::kStaggered ? "staggered" : "destaggered"; };
+    if (found && *found != parameters_.organized_column_order) {
+      warnSetting("organized_columns",
+                  std::string("the organized clouds on ") + input_subscriber_.getTopic() + " are " + name(*found) +
+                      " but parameter " + getPrivateNodeHandle().resolveName("organized_columns") + " says " +
+                      name(parameters_.organized_column_order) + ": set organized_columns: " + name(*found) +
+                      " (ouster-ros destagger:=" + (*found == ColumnOrder::kDestaggered ? "true" : "false") +
+                      "); the data's order is used");
+      organized_column_order_ = *found;
+    }
+  }
+  cloud.organized_column_order = organized_column_order_;
+  ProjectionStatistics statistics;
+  const RangeImage image = ring_to_row_.empty() ? projectPointCloud(cloud, cloud_model_, &statistics)
+                                                : projectPointCloud(cloud, cloud_model_, ring_to_row_, &statistics);
+  accumulate(projection_statistics_, statistics);
+  checkModelFit(statistics);
+  publish(image, header);
+}
+
+bool AdapterNodelet::estimateCloudModel(const PointCloudInput& cloud, const std_msgs::Header& header) {
+  held_clouds_.push_back({cloud, header});
+  if (static_cast<int>(held_clouds_.size()) < parameters_.estimate_clouds) return false;
+  std::vector<PointCloudInput> clouds;
+  for (const HeldCloud& held : held_clouds_) clouds.push_back(held.cloud);
+  SensorEstimate estimate;
+  try {
+    estimate = estimateSensorModel(clouds);
+  } catch (const SensorEstimationError& error) {
+    // More clouds may tell the beams apart; the oldest go once enough were tried.
+    const std::size_t limit = std::size_t(10) * parameters_.estimate_clouds;
+    if (held_clouds_.size() >= limit) {
+      drops_.rejected_clouds += held_clouds_.size() - parameters_.estimate_clouds + 1;
+      held_clouds_.erase(held_clouds_.begin(), held_clouds_.end() - (parameters_.estimate_clouds - 1));
+    }
+    if (cloud_error_log_.allow(parameters_.statistics_period_s))
+      NODELET_ERROR("no sensor model could be estimated from %zu clouds on %s (%s): set parameter %s to a sensor "
+                    "file or a named model (%s)",
+                    clouds.size(), input_subscriber_.getTopic().c_str(), error.what(),
+                    getPrivateNodeHandle().resolveName("sensor").c_str(), sensorCatalogNames().c_str());
+    return false;
+  }
+  cloud_model_ = std::make_shared<const LidarModel>(estimate.intrinsics);
+  ring_to_row_ = estimate.ring_to_row;
+  NODELET_INFO("sensor model estimated from the first %zu clouds on %s: %s", clouds.size(),
+               input_subscriber_.getTopic().c_str(), describeSensorEstimate(estimate).c_str());
+  if (const std::optional<std::string> warning = sensorModelFitWarning(
+          estimate.fit, "give the sensor's own model with parameter " +
+                            getPrivateNodeHandle().resolveName("sensor") +
+                            " (a sensor file, e.g. from rim sensor estimate on a recording, or one of " +
+                            sensorCatalogNames() + ")"))
+    warnSetting("sensor", "estimated " + *warning);
+  // The estimate's own fit is the check: no second one.
+  fit_check_clouds_ = std::size_t(parameters_.estimate_clouds);
+  return true;
+}
+
+// The first clouds of a model given by the settings: does it explain them?
+void AdapterNodelet::checkModelFit(const ProjectionStatistics& statistics) {
+  if (fit_check_clouds_ >= std::size_t(parameters_.estimate_clouds)) return;
+  accumulate(fit_check_statistics_, statistics);
+  if (++fit_check_clouds_ < std::size_t(parameters_.estimate_clouds)) return;
+  const std::string parameter = parameters_.cloud_intrinsics == CloudIntrinsicsSource::kSensor   ? "sensor"
+                                : parameters_.cloud_intrinsics == CloudIntrinsicsSource::kOuster ? "metadata_file"
+                                : parameters_.cloud_intrinsics == CloudIntrinsicsSource::kRing   ? "columns"
+                                                                                                 : "intrinsics";
+  if (const std::optional<std::string> warning = projectionWarning(
+          fit_check_statistics_,
+          "check parameter " + getPrivateNodeHandle().resolveName(parameter) + " (" +
+              cloud_model_->intrinsics().sensor_model + "), or drop " +
+              getPrivateNodeHandle().resolveName("intrinsics") + " and " +
+              getPrivateNodeHandle().resolveName("sensor") + " to estimate the model from the clouds"))
+    warnSetting("model fit", "the first " + std::to_string(fit_check_clouds_) + " clouds: " + *warning);
+}
+
+void AdapterNodelet::checkCloudStream(const PointCloudInput& cloud, const std::string& frame_id) {
+  // The launch's base frame defaults to sensor_frame: clouds in another frame
+  // leave the Odometry waiting for a transform nobody publishes.
+  if (!frame_id.empty() && frame_id != parameters_.sensor_frame && frame_id != parameters_.lidar_frame)
+    warnSetting("sensor_frame", "clouds on " + input_subscriber_.getTopic() + " are in frame '" + frame_id +
+                                    "' but parameter " + getPrivateNodeHandle().resolveName("sensor_frame") +
+                                    " is '" + parameters_.sensor_frame + "' (and lidar_frame '" +
+                                    parameters_.lidar_frame + "'): set sensor_frame:=" + frame_id +
+                                    " (a launch argument) so that tf lookups use the clouds' frame");
+  cloud_gaps_.add(cloud.stamp_ns);
+  if (cloud_gaps_.early() > 0)
+    warnSetting("stamps", "clouds on " + input_subscriber_.getTopic() + " are stamped less than half a period (" +
+                              std::to_string(cloud_gaps_.periodSeconds()) +
+                              " s) after the previous one: the driver stamps with jitter, e.g. the receive time "
+                              "(ouster-ros timestamp_mode TIME_FROM_ROS_TIME): stamp with the sensor's clock "
+                              "(TIME_FROM_INTERNAL_OSC, or PTP), or clouds with absolute per-point times");
+}
+
+void AdapterNodelet::warnSetting(const std::string& key, const std::string& message) {
+  if (setting_warnings_.count(key)) return;
+  setting_warnings_[key] = message;
+  NODELET_WARN("%s", message.c_str());
+}
+
+void AdapterNodelet::diagnoseClouds(diagnostic_updater::DiagnosticStatusWrapper& status) {
+  if (!setting_warnings_.empty()) {
+    std::string summary;
+    for (const auto& [key, message] : setting_warnings_) summary += (summary.empty() ? "" : " | ") + message;
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, summary);
+  } else if (clouds_ == 0) {
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "no point clouds");
+  } else {
+    status.summary(diagnostic_msgs::DiagnosticStatus::OK, "converting");
+  }
+  for (const auto& [key, message] : setting_warnings_) status.add("warning: " + key, message);
+  status.add("clouds", clouds_);
+  status.add("clouds missing (from the stamps)", cloud_gaps_.missing());
+  status.add("sensor model", cloud_model_ ? cloud_model_->intrinsics().sensor_model : std::string("not yet"));
+  const ProjectionStatistics& projected = projection_statistics_;
+  const double measured = std::max<double>(1.0, double(projected.measured()));
+  status.addf("kept share", "%.4f", projected.keptFraction());
+  status.addf("outside the model share", "%.4f", double(projected.outside_model) / measured);
+  status.addf("shared pixel share", "%.4f", double(projected.occluded) / measured);
+  status.add("no-return points", projected.non_finite + projected.no_return);
 }
 
 // ------------------------------------------------------------ output
@@ -528,16 +724,16 @@ void AdapterNodelet::onStatisticsTimer(const ros::SteadyTimerEvent&) {
   const std::size_t incomplete = batcher.incomplete_scans - before.incomplete_scans;
   const ProjectionStatistics& projected = projection_statistics_;
   const ProjectionStatistics& projected_before = logged_projection_statistics_;
-  const std::size_t point_drops = (projected.non_finite - projected_before.non_finite) +
-                                  (projected.no_return - projected_before.no_return) +
-                                  (projected.outside_model - projected_before.outside_model);
-  const std::size_t other_drops = drops_.total() - logged_drops_.total();
+  // NaN and (0, 0, 0) points are how drivers say "no return": not drops.
+  const std::size_t point_drops = projected.outside_model - projected_before.outside_model;
+  const std::size_t missing_clouds = cloud_gaps_.missing() - logged_missing_clouds_;
+  const std::size_t other_drops = drops_.total() - logged_drops_.total() + missing_clouds;
   if (packet_drops + incomplete + point_drops + other_drops > 0) {
     NODELET_WARN(
         "last %.0f s: packets dropped %zu (wrong size %zu, malformed %zu, bad checksum %zu, stale %zu, "
         "not Ouster packets %zu, no metadata %zu); incomplete scans %zu (%zu columns missing); "
-        "points dropped %zu (non-finite %zu, at the origin %zu, outside the model %zu); "
-        "clouds rejected %zu; "
+        "points outside the model %zu (no-return points, not counted: NaN %zu, at the origin %zu); "
+        "clouds rejected %zu, missing %zu (from the stamps); "
         "scans failed %zu",
         parameters_.statistics_period_s, packet_drops, batcher.wrong_size - before.wrong_size,
         batcher.malformed - before.malformed, batcher.bad_checksum - before.bad_checksum,
@@ -547,13 +743,13 @@ void AdapterNodelet::onStatisticsTimer(const ros::SteadyTimerEvent&) {
         batcher.missing_columns - before.missing_columns, point_drops,
         projected.non_finite - projected_before.non_finite,
         projected.no_return - projected_before.no_return,
-        projected.outside_model - projected_before.outside_model,
-        drops_.rejected_clouds - logged_drops_.rejected_clouds,
+        drops_.rejected_clouds - logged_drops_.rejected_clouds, missing_clouds,
         drops_.failed_scans - logged_drops_.failed_scans);
   }
   logged_batcher_statistics_ = batcher;
   logged_projection_statistics_ = projection_statistics_;
   logged_drops_ = drops_;
+  logged_missing_clouds_ = cloud_gaps_.missing();
 }
 
 }  // namespace range_image_mapping

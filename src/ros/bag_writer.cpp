@@ -20,16 +20,18 @@ constexpr uint32_t kRingOffset = 20;
 constexpr uint32_t kTimedPointStep = 24;
 constexpr uint32_t kPlainPointStep = 16;
 
+void addField(sensor_msgs::PointCloud2& cloud, const char* name, uint32_t offset, uint8_t datatype) {
+  PointField field;
+  field.name = name;
+  field.offset = offset;
+  field.datatype = datatype;
+  field.count = 1;
+  cloud.fields.push_back(field);
+}
+
 void setFields(sensor_msgs::PointCloud2& cloud, bool with_time_and_ring) {
   cloud.fields.clear();
-  const auto add = [&](const char* name, uint32_t offset, uint8_t datatype) {
-    PointField field;
-    field.name = name;
-    field.offset = offset;
-    field.datatype = datatype;
-    field.count = 1;
-    cloud.fields.push_back(field);
-  };
+  const auto add = [&](const char* name, uint32_t offset, uint8_t datatype) { addField(cloud, name, offset, datatype); };
   add("x", 0, PointField::FLOAT32);
   add("y", 4, PointField::FLOAT32);
   add("z", 8, PointField::FLOAT32);
@@ -67,6 +69,89 @@ void writeTimeAndRing(uint8_t* point, uint32_t time_offset_ns, uint16_t ring) {
   std::memcpy(point + kRingOffset, &ring, sizeof(uint16_t));
 }
 
+// The real drivers' layouts (CloudLayout kOusterRos, kVelodyne, kHesai).
+void driverCloud(const RangeImage& image, CloudLayout layout, const std::vector<uint32_t>& time_offsets,
+                 sensor_msgs::PointCloud2& cloud) {
+  const LidarModel& model = *image.model;
+  const int rows = image.rows(), columns = image.columns();
+  cloud.fields.clear();
+  const auto add = [&](const char* name, uint32_t offset, uint8_t datatype) { addField(cloud, name, offset, datatype); };
+  add("x", 0, PointField::FLOAT32);
+  add("y", 4, PointField::FLOAT32);
+  add("z", 8, PointField::FLOAT32);
+  uint32_t intensity_offset = 12, ring_offset = 20, time_offset = 16;
+  if (layout == CloudLayout::kOusterRos) {
+    add("intensity", 12, PointField::FLOAT32);
+    add("t", 16, PointField::UINT32);
+    add("ring", 20, PointField::UINT16);
+    cloud.point_step = 24;
+  } else if (layout == CloudLayout::kVelodyne) {
+    intensity_offset = 16, ring_offset = 20, time_offset = 24;
+    add("intensity", 16, PointField::FLOAT32);
+    add("ring", 20, PointField::UINT16);
+    add("time", 24, PointField::FLOAT32);
+    cloud.point_step = 32;
+  } else {
+    ring_offset = 24;
+    add("intensity", 12, PointField::FLOAT32);
+    add("timestamp", 16, PointField::FLOAT64);
+    add("ring", 24, PointField::UINT16);
+    cloud.point_step = 32;
+  }
+  cloud.is_bigendian = false;
+  const bool organized = layout == CloudLayout::kOusterRos;
+  const Eigen::Isometry3f lidar_to_sensor = model.intrinsics().lidar_to_sensor.cast<float>();
+  const auto write = [&](uint8_t* point, int v, int u, bool valid) {
+    const std::size_t i = image.index(v, u);
+    Eigen::Vector3f xyz = Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN());
+    if (valid) xyz = model.unproject(u, v, image.range[i]);
+    if (organized && valid) xyz = lidar_to_sensor * xyz;
+    std::memcpy(point, xyz.data(), 3 * sizeof(float));
+    const float intensity = image.intensity.empty() ? 0.0f : image.intensity[i];
+    std::memcpy(point + intensity_offset, &intensity, sizeof(float));
+    // Velodyne numbers its rings from the lowest beam up.
+    const uint16_t ring = static_cast<uint16_t>(layout == CloudLayout::kVelodyne ? rows - 1 - v : v);
+    std::memcpy(point + ring_offset, &ring, sizeof(ring));
+    if (layout == CloudLayout::kOusterRos) {
+      std::memcpy(point + time_offset, &time_offsets[u], sizeof(uint32_t));
+    } else if (layout == CloudLayout::kVelodyne) {
+      const float seconds = static_cast<float>(time_offsets[u] * 1e-9);
+      std::memcpy(point + time_offset, &seconds, sizeof(float));
+    } else {
+      const double absolute_s = double(image.stamp_ns + time_offsets[u]) * 1e-9;
+      std::memcpy(point + time_offset, &absolute_s, sizeof(double));
+    }
+  };
+  if (organized) {
+    cloud.height = static_cast<uint32_t>(rows);
+    cloud.width = static_cast<uint32_t>(columns);
+    cloud.row_step = cloud.width * cloud.point_step;
+    cloud.data.assign(std::size_t(cloud.row_step) * cloud.height, 0);
+    cloud.is_dense = false;  // no return is NaN
+    const std::vector<int>& shifts = model.intrinsics().pixel_shift_by_row;
+    for (int v = 0; v < rows; ++v) {
+      const int shift = ((shifts[v] % columns) + columns) % columns;
+      for (int u = 0; u < columns; ++u)
+        write(cloud.data.data() + std::size_t(v) * cloud.row_step + std::size_t((u + shift) % columns) * cloud.point_step,
+              v, u, isValidRange(image.range[image.index(v, u)]));
+    }
+    return;
+  }
+  cloud.height = 1;
+  cloud.width = static_cast<uint32_t>(image.validCount());
+  cloud.row_step = cloud.width * cloud.point_step;
+  cloud.data.assign(std::size_t(cloud.row_step), 0);
+  cloud.is_dense = true;
+  uint8_t* point = cloud.data.data();
+  // Column by column, as the drivers fill their clouds packet by packet.
+  for (int u = 0; u < columns; ++u)
+    for (int v = 0; v < rows; ++v) {
+      if (!isValidRange(image.range[image.index(v, u)])) continue;
+      write(point, v, u, true);
+      point += cloud.point_step;
+    }
+}
+
 }  // namespace
 
 void rangeImageToPointCloud2(const RangeImage& image, CloudLayout layout, const std::string& frame_id,
@@ -85,6 +170,10 @@ void rangeImageToPointCloud2(const RangeImage& image, CloudLayout layout, const 
 
   cloud.header.frame_id = frame_id;
   cloud.header.stamp.fromNSec(image.stamp_ns);
+  if (layout == CloudLayout::kOusterRos || layout == CloudLayout::kVelodyne || layout == CloudLayout::kHesai) {
+    driverCloud(image, layout, columnTimeOffsets(image), cloud);
+    return;
+  }
   setFields(cloud, timed);
   const auto intensityAt = [&](std::size_t i) { return image.intensity.empty() ? 0.0f : image.intensity[i]; };
 

@@ -170,11 +170,24 @@ AdapterParameters readAdapterParameters(const ros::NodeHandle& private_node) {
   parameters.pending_packet_limit =
       reader.getInt("pending_packet_limit", defaults.pending_packet_limit, 0, 1 << 20);
 
-  const std::string intrinsics =
-      reader.getChoice("intrinsics", "synthetic", {"synthetic", "ring", "ouster"});
-  parameters.cloud_intrinsics = intrinsics == "ring"     ? CloudIntrinsicsSource::kRing
-                                : intrinsics == "ouster" ? CloudIntrinsicsSource::kOuster
-                                                         : CloudIntrinsicsSource::kSynthetic;
+  parameters.sensor = reader.getString("sensor", defaults.sensor);
+  // A sensor given is the model; without one the clouds' own estimate.
+  const std::string intrinsics = reader.getChoice("intrinsics", parameters.sensor.empty() ? "estimate" : "sensor",
+                                                  {"estimate", "sensor", "synthetic", "ring", "ouster"});
+  parameters.cloud_intrinsics = intrinsics == "sensor"      ? CloudIntrinsicsSource::kSensor
+                                : intrinsics == "synthetic" ? CloudIntrinsicsSource::kSynthetic
+                                : intrinsics == "ring"      ? CloudIntrinsicsSource::kRing
+                                : intrinsics == "ouster"    ? CloudIntrinsicsSource::kOuster
+                                                            : CloudIntrinsicsSource::kEstimate;
+  if (!parameters.sensor.empty() && parameters.cloud_intrinsics != CloudIntrinsicsSource::kSensor)
+    throw ParameterError("parameter " + private_node.resolveName("sensor") + " ('" + parameters.sensor +
+                         "') gives the sensor model, but " + private_node.resolveName("intrinsics") + " is " +
+                         intrinsics + ": set only one of them");
+  if (parameters.input == AdapterInput::kPointCloud && parameters.cloud_intrinsics == CloudIntrinsicsSource::kSensor &&
+      parameters.sensor.empty())
+    throw ParameterError("parameter " + private_node.resolveName("sensor") +
+                         " (a sensor file or a named model) is required with intrinsics: sensor");
+  parameters.estimate_clouds = reader.getInt("estimate_clouds", defaults.estimate_clouds, 1, 100);
   parameters.rows = reader.getInt("rows", defaults.rows, 1, 4096);
   parameters.columns = reader.getInt("columns", defaults.columns, 1, 1 << 16);
   parameters.fov_up_deg = reader.getDouble("fov_up_deg", defaults.fov_up_deg, -90.0, 90.0);

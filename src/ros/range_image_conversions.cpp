@@ -71,102 +71,11 @@ bool sameTables(const LidarIntrinsics& tables, const LidarRangeImage& message) {
 
 // ------------------------------------------------------------ PointCloud2
 
-const char* datatypeName(uint8_t datatype) {
-  switch (datatype) {
-    case sensor_msgs::PointField::INT8: return "int8";
-    case sensor_msgs::PointField::UINT8: return "uint8";
-    case sensor_msgs::PointField::INT16: return "int16";
-    case sensor_msgs::PointField::UINT16: return "uint16";
-    case sensor_msgs::PointField::INT32: return "int32";
-    case sensor_msgs::PointField::UINT32: return "uint32";
-    case sensor_msgs::PointField::FLOAT32: return "float32";
-    case sensor_msgs::PointField::FLOAT64: return "float64";
-    default: return "unknown";
-  }
-}
-
-std::size_t datatypeSize(uint8_t datatype) {
-  switch (datatype) {
-    case sensor_msgs::PointField::INT8:
-    case sensor_msgs::PointField::UINT8: return 1;
-    case sensor_msgs::PointField::INT16:
-    case sensor_msgs::PointField::UINT16: return 2;
-    case sensor_msgs::PointField::INT32:
-    case sensor_msgs::PointField::UINT32:
-    case sensor_msgs::PointField::FLOAT32: return 4;
-    case sensor_msgs::PointField::FLOAT64: return 8;
-    default: return 0;
-  }
-}
-
 template <typename T>
 T readUnaligned(const uint8_t* bytes) {
   T value;
   std::memcpy(&value, bytes, sizeof(T));
   return value;
-}
-
-// One field of a PointCloud2 point, read as double whatever its type (little endian).
-struct FieldReader {
-  const sensor_msgs::PointField* field = nullptr;
-
-  explicit operator bool() const { return field != nullptr; }
-  double read(const uint8_t* point) const {
-    const uint8_t* bytes = point + field->offset;
-    switch (field->datatype) {
-      case sensor_msgs::PointField::INT8: return readUnaligned<int8_t>(bytes);
-      case sensor_msgs::PointField::UINT8: return readUnaligned<uint8_t>(bytes);
-      case sensor_msgs::PointField::INT16: return readUnaligned<int16_t>(bytes);
-      case sensor_msgs::PointField::UINT16: return readUnaligned<uint16_t>(bytes);
-      case sensor_msgs::PointField::INT32: return readUnaligned<int32_t>(bytes);
-      case sensor_msgs::PointField::UINT32: return readUnaligned<uint32_t>(bytes);
-      case sensor_msgs::PointField::FLOAT32: return readUnaligned<float>(bytes);
-      default: return readUnaligned<double>(bytes);
-    }
-  }
-};
-
-// Finds a field and checks its type is one of allowed; an absent field is an
-// empty reader, a present one of another type an error naming both.
-FieldReader findField(const sensor_msgs::PointCloud2& cloud, const std::string& name,
-                      std::initializer_list<uint8_t> allowed, const std::string& allowed_names) {
-  for (const sensor_msgs::PointField& field : cloud.fields) {
-    if (field.name != name) continue;
-    bool type_ok = false;
-    for (const uint8_t datatype : allowed) type_ok |= field.datatype == datatype;
-    if (!type_ok)
-      fail("PointCloud2: field '" + name + "' has type " + datatypeName(field.datatype) + " (" +
-           std::to_string(field.datatype) + "), expected " + allowed_names);
-    if (field.count > 1)
-      fail("PointCloud2: field '" + name + "' has count " + std::to_string(field.count) +
-           ", expected 1");
-    if (std::uint64_t(field.offset) + datatypeSize(field.datatype) > cloud.point_step)
-      fail("PointCloud2: field '" + name + "' at offset " + std::to_string(field.offset) +
-           " does not fit in point_step " + std::to_string(cloud.point_step));
-    return FieldReader{&field};
-  }
-  return FieldReader{};
-}
-
-FieldReader requireField(const sensor_msgs::PointCloud2& cloud, const std::string& name,
-                         std::initializer_list<uint8_t> allowed, const std::string& allowed_names) {
-  FieldReader reader = findField(cloud, name, allowed, allowed_names);
-  if (!reader) fail("PointCloud2: required field '" + name + "' (" + allowed_names + ") is missing");
-  return reader;
-}
-
-void checkCloudSizes(const sensor_msgs::PointCloud2& cloud) {
-  if (cloud.is_bigendian) fail("PointCloud2: is_bigendian is set; big-endian clouds are not supported");
-  const std::uint64_t points = std::uint64_t(cloud.width) * cloud.height;
-  if (points == 0) return;
-  if (cloud.point_step == 0) fail("PointCloud2: point_step is 0");
-  if (std::uint64_t(cloud.point_step) * cloud.width > cloud.row_step)
-    fail("PointCloud2: row_step " + std::to_string(cloud.row_step) + " is smaller than width " +
-         std::to_string(cloud.width) + " * point_step " + std::to_string(cloud.point_step));
-  if (std::uint64_t(cloud.row_step) * cloud.height > cloud.data.size())
-    fail("PointCloud2: data has " + std::to_string(cloud.data.size()) + " bytes, height " +
-         std::to_string(cloud.height) + " * row_step " + std::to_string(cloud.row_step) +
-         " needs more");
 }
 
 }  // namespace
@@ -324,47 +233,22 @@ void pointsToPointCloud2(const std::vector<Eigen::Vector3f>& points, const std::
   }
 }
 
-void fromPointCloud2(const sensor_msgs::PointCloud2& cloud, PointCloudInput& input) {
-  using sensor_msgs::PointField;
-  checkCloudSizes(cloud);
-  const std::string coordinate_types = "float32 or float64";
-  const FieldReader x = requireField(cloud, "x", {PointField::FLOAT32, PointField::FLOAT64}, coordinate_types);
-  const FieldReader y = requireField(cloud, "y", {PointField::FLOAT32, PointField::FLOAT64}, coordinate_types);
-  const FieldReader z = requireField(cloud, "z", {PointField::FLOAT32, PointField::FLOAT64}, coordinate_types);
-  const FieldReader intensity = findField(
-      cloud, "intensity",
-      {PointField::INT8, PointField::UINT8, PointField::INT16, PointField::UINT16, PointField::INT32,
-       PointField::UINT32, PointField::FLOAT32, PointField::FLOAT64},
-      "a numeric type");
-  const FieldReader ring = findField(cloud, "ring", {PointField::UINT8, PointField::UINT16}, "uint8 or uint16");
-  // Ouster writes t as uint32 nanoseconds, Velodyne drivers time as float seconds.
-  const std::initializer_list<uint8_t> time_types = {PointField::UINT32, PointField::FLOAT32,
-                                                     PointField::FLOAT64};
-  const std::string time_type_names = "uint32 nanoseconds or float32/float64 seconds";
-  FieldReader time = findField(cloud, "t", time_types, time_type_names);
-  if (!time) time = findField(cloud, "time", time_types, time_type_names);
-  input.intensity_field = intensity ? "intensity" : "";
-  const double time_scale = time && time.field->datatype == PointField::UINT32 ? 1e-9 : 1.0;
-
-  const std::size_t count = std::size_t(cloud.width) * cloud.height;
-  input.points.resize(count);
-  input.intensity.resize(intensity ? count : 0);
-  input.ring.resize(ring ? count : 0);
-  input.time_offset_s.resize(time ? count : 0);
-  input.organized_height = static_cast<int>(cloud.height);
-  input.organized_width = static_cast<int>(cloud.width);
-  input.stamp_ns = cloud.header.stamp.toNSec();
-
-  std::size_t i = 0;
-  for (uint32_t row = 0; row < cloud.height; ++row) {
-    const uint8_t* point = cloud.data.data() + std::size_t(row) * cloud.row_step;
-    for (uint32_t column = 0; column < cloud.width; ++column, ++i, point += cloud.point_step) {
-      input.points[i] = Eigen::Vector3f(static_cast<float>(x.read(point)), static_cast<float>(y.read(point)),
-                                        static_cast<float>(z.read(point)));
-      if (intensity) input.intensity[i] = static_cast<float>(intensity.read(point));
-      if (ring) input.ring[i] = static_cast<uint16_t>(ring.read(point));
-      if (time) input.time_offset_s[i] = static_cast<float>(time.read(point) * time_scale);
-    }
+void fromPointCloud2(const sensor_msgs::PointCloud2& cloud, PointCloudInput& input, PointCloudReadReport* report) {
+  PointCloudLayout layout;
+  for (const sensor_msgs::PointField& field : cloud.fields)
+    layout.fields.push_back({field.name, field.offset, field.datatype, field.count});
+  layout.height = cloud.height;
+  layout.width = cloud.width;
+  layout.point_step = cloud.point_step;
+  layout.row_step = cloud.row_step;
+  layout.is_bigendian = cloud.is_bigendian;
+  try {
+    readPointCloud(layout, cloud.data.data(), cloud.data.size(), cloud.header.stamp.toNSec(), input, report);
+  } catch (const PointCloudLayoutError& error) {
+    // The core's "point cloud: ..." as "PointCloud2: ...".
+    const std::string what = error.what();
+    const std::string core_prefix = "point cloud: ";
+    fail("PointCloud2: " + (what.rfind(core_prefix, 0) == 0 ? what.substr(core_prefix.size()) : what));
   }
 }
 

@@ -28,6 +28,34 @@ TEST(AdapterParameters, DefaultsWhenNothingIsSet) {
   EXPECT_EQ(parameters.rows, defaults.rows);
   EXPECT_EQ(parameters.columns, defaults.columns);
   EXPECT_FALSE(parameters.publish_static_tf);
+  // Clouds without a model: estimated from the first clouds.
+  EXPECT_EQ(parameters.cloud_intrinsics, CloudIntrinsicsSource::kEstimate);
+  EXPECT_TRUE(parameters.sensor.empty());
+}
+
+// sensor (a file or a named model) is the model, and refuses to be set
+// together with another intrinsics.
+TEST(AdapterParameters, SensorGivesTheModelAndExcludesOtherIntrinsics) {
+  ros::NodeHandle named("~named_sensor");
+  named.setParam("input", "pointcloud");
+  named.setParam("sensor", "VLP-32C");
+  const AdapterParameters parameters = readAdapterParameters(named);
+  EXPECT_EQ(parameters.cloud_intrinsics, CloudIntrinsicsSource::kSensor);
+  EXPECT_EQ(parameters.sensor, "VLP-32C");
+
+  ros::NodeHandle both("~sensor_and_ring");
+  both.setParam("sensor", "VLP-16");
+  both.setParam("intrinsics", "ring");
+  const std::string conflict = errorOf([&] { readAdapterParameters(both); });
+  EXPECT_NE(conflict.find("/sensor_and_ring/sensor ('VLP-16') gives the sensor model"), std::string::npos) << conflict;
+  EXPECT_NE(conflict.find("set only one of them"), std::string::npos) << conflict;
+
+  ros::NodeHandle without("~sensor_without_name");
+  without.setParam("input", "pointcloud");
+  without.setParam("intrinsics", "sensor");
+  const std::string missing = errorOf([&] { readAdapterParameters(without); });
+  EXPECT_NE(missing.find("sensor_without_name/sensor (a sensor file or a named model) is required"), std::string::npos)
+      << missing;
 }
 
 TEST(AdapterParameters, ValuesAreReadAndCheckedByName) {
@@ -91,6 +119,12 @@ TEST(AdapterParameters, NodeletWithABadParameterFailsToLoad) {
   test::expectRefused(loader, adapter, "/missing_metadata_adapter", "metadata_file",
                       std::string("/nonexistent/metadata.json"),
                       "/missing_metadata_adapter/metadata_file ('/nonexistent/metadata.json') gives no sensor model");
+  // An unknown sensor name: refused, listing the names it knows.
+  ros::NodeHandle unknown_sensor("/unknown_sensor_adapter");
+  unknown_sensor.setParam("input", "pointcloud");
+  test::expectRefused(loader, adapter, "/unknown_sensor_adapter", "sensor", std::string("VLP-17"),
+                      "/unknown_sensor_adapter/sensor ('VLP-17') gives no sensor model: VLP-17: is neither a sensor "
+                      "file (no such file) nor a named sensor model (known: VLP-16, VLP-32C");
   ros::NodeHandle("/good_adapter").setParam("input", "pointcloud");
   test::expectLoaded(loader, adapter, "/good_adapter");
   loader.clear();

@@ -235,7 +235,7 @@ TEST_F(PointCloudAdapterTest, RingIntrinsicsComeFromTheRingField) {
     for (int u = 0; u < synthetic.columns(); ++u)
       if (synthetic.valid(v, u)) rings = v + 1;
   ASSERT_EQ(int(image->height), rings) << "one row per ring";
-  EXPECT_EQ(image->width, 1800u) << "columns of config/velodyne_vlp16.yaml";
+  EXPECT_EQ(image->width, 1808u) << "columns of config/velodyne_vlp16.yaml";
   // Ring r holds the points of synthetic row r, so its median elevation lies
   // within half a row spacing of that row's altitude.
   const LidarIntrinsics& rows = synthetic.model->intrinsics();

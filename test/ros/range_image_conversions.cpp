@@ -288,27 +288,19 @@ TEST(PointCloudConversion, UnusableCloudsNameTheFieldAndType) {
       error(makeCloud({{"x", PointField::FLOAT32}, {"y", PointField::FLOAT32}, {"z", PointField::FLOAT32},
                        {"ring", PointField::FLOAT32}}, 1, 2, any));
   EXPECT_NE(float_ring.find("'ring' has type float32"), std::string::npos) << float_ring;
-  const std::string signed_time =
-      error(makeCloud({{"x", PointField::FLOAT32}, {"y", PointField::FLOAT32}, {"z", PointField::FLOAT32},
-                       {"t", PointField::INT16}}, 1, 2, any));
-  EXPECT_NE(signed_time.find("'t' has type int16"), std::string::npos) << signed_time;
 
   auto good = makeCloud({{"x", PointField::FLOAT32}, {"y", PointField::FLOAT32}, {"z", PointField::FLOAT32}}, 2, 2, any);
   auto truncated = good;
   truncated.data.resize(truncated.data.size() - 1);
   EXPECT_NE(error(truncated).find("data has"), std::string::npos);
-  auto big_endian = good;
-  big_endian.is_bigendian = true;
-  EXPECT_NE(error(big_endian).find("is_bigendian"), std::string::npos);
   auto outside = good;
   outside.fields[2].offset = 10;
   EXPECT_NE(error(outside).find("'z' at offset 10"), std::string::npos);
   auto short_rows = good;
   short_rows.row_step = 4;
   EXPECT_NE(error(short_rows).find("row_step"), std::string::npos);
-  auto counted = good;
-  counted.fields[1].count = 3;
-  EXPECT_NE(error(counted).find("'y' has count 3"), std::string::npos);
+  // The core reader's errors (point_cloud_layout.h) come as the message's.
+  EXPECT_EQ(error(truncated).rfind("PointCloud2: ", 0), 0u) << error(truncated);
 }
 
 // ------------------------------------------------------------ Ouster packet messages

@@ -1,9 +1,10 @@
 // KITTI odometry files: Velodyne scans (.bin), pose files and the calibration's
-// Tr (velodyne -> camera 0), plus the synthetic HDL-64E intrinsics.
+// Tr (velodyne -> camera 0); the HDL-64E intrinsics are the sensor catalog's.
 #pragma once
 
 #include "range_image_mapping/lidar_intrinsics.h"
 #include "range_image_mapping/point_cloud_projection.h"
+#include "range_image_mapping/sensor_catalog.h"
 
 #include <Eigen/Geometry>
 
@@ -46,12 +47,7 @@ std::vector<Eigen::Isometry3d> velodynePosesFromCameraPoses(
     const std::vector<Eigen::Isometry3d>& camera_poses,
     const Eigen::Isometry3d& velodyne_to_camera);
 
-// Synthetic intrinsics for KITTI's Velodyne HDL-64E: 64 rows evenly spread
-// from +3 deg down to -25 deg, no azimuth offsets, no beam offset. The data
-// sheet says +2 to -24.8 deg, but seen from the KITTI Velodyne origin the
-// upper lasers reach +3.7 deg (3.4 % of scan 94's points lie above +2.2 deg).
-// Share of scan 94's points that get a pixel of their own: 80 % at 2048
-// columns, 92 % at 4096 (the lasers' firings do not fall on one regular grid).
-LidarIntrinsics kittiHdl64Intrinsics(int columns = 2048);
+// KITTI's Velodyne HDL-64E (the sensor catalog's HDL-64E, sensor_catalog.h).
+using range_image_mapping::kittiHdl64Intrinsics;
 
 }  // namespace range_image_mapping::io

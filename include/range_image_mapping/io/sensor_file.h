@@ -1,6 +1,6 @@
 // Sensor files: any sensor model as YAML (beam tables in degrees, as data
 // sheets and calibration files give them), written by `rim sensor estimate`
-// and read by --sensor FILE; an Ouster metadata JSON is read as a sensor file
+// and read by --sensor FILE|NAME; an Ouster metadata JSON is read as a sensor file
 // too.
 //
 //   sensor_model: estimated          # free text
@@ -39,8 +39,11 @@ struct SensorFile {
   std::vector<int> ring_to_row;  // empty unless the file gives one
 };
 
-// YAML as above; a file ending in .json is read as Ouster metadata.
-SensorFile readSensorFile(const std::string& path);
+// YAML as above; a file ending in .json is read as Ouster metadata. A path
+// that is no file but a named model of the sensor catalog (sensor_catalog.h:
+// VLP-16, HDL-64E, Pandar64, ...) gives that model; neither is an error that
+// lists the known names.
+SensorFile readSensorFile(const std::string& path_or_name);
 // The YAML text itself; source names it in errors.
 SensorFile parseSensorYaml(const std::string& text, const std::string& source = "sensor file");
 

@@ -98,11 +98,26 @@ enum class CloudLayout {
   kUnorganized,
   // Valid points only; x y z intensity (float32).
   kPlain,
+  // The real drivers' conventions, so that what the tests feed the Adapter
+  // is what users have:
+  // ouster-ros: H x W, destaggered, in the sensor frame (points moved by
+  // lidar_to_sensor; the caller names the frame, e.g. os_sensor), no return
+  // = NaN, t (uint32 ns after the stamp), ring (uint16, 0 = top beam),
+  // fields x y z intensity t ring at 0 4 8 12 16 20, 24 bytes a point.
+  kOusterRos,
+  // velodyne_pointcloud: valid points only (no return dropped), ring (uint16,
+  // 0 = lowest beam), time (float32 s after the stamp); x y z at 0 4 8,
+  // intensity 16, ring 20, time 24, 32 bytes a point (PCL's padded layout).
+  kVelodyne,
+  // Hesai's driver: valid points only, timestamp (float64 absolute s), ring
+  // (uint16, 0 = top beam); x y z intensity at 0 4 8 12, timestamp 16, ring
+  // 24, 32 bytes a point.
+  kHesai,
 };
 
 // Fills cloud from a staggered range image (reusing its buffers). intensity is
-// the image's (0 when it has none); t comes from the column timestamps (0 for
-// missing columns). Throws std::invalid_argument for a destaggered image, or a
+// the image's (0 when it has none); point times come from the column
+// timestamps (0 / the stamp for missing columns). Throws std::invalid_argument for a destaggered image, or a
 // column time before the stamp or more than 2^32 ns after it.
 void rangeImageToPointCloud2(const RangeImage& image, CloudLayout layout, const std::string& frame_id,
                              sensor_msgs::PointCloud2& cloud);

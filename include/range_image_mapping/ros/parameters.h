@@ -61,8 +61,10 @@ class ParameterReader {
 // ------------------------------------------------------------ Adapter nodelet
 
 enum class AdapterInput { kOusterPackets, kPointCloud };
-// Where the intrinsics of a PointCloud2 input come from.
-enum class CloudIntrinsicsSource { kSynthetic, kRing, kOuster };
+// Where the intrinsics of a PointCloud2 input come from: estimated from the
+// first clouds, a sensor file or named model (sensor), synthetic tables, the
+// ring field, or Ouster metadata.
+enum class CloudIntrinsicsSource { kEstimate, kSensor, kSynthetic, kRing, kOuster };
 // What the header stamp of a range image from Ouster packets is.
 enum class StampSource { kReceiveTime, kSensorClock };
 
@@ -80,7 +82,9 @@ struct AdapterParameters {
   int packet_queue_size = 2048;
   int pending_packet_limit = 4096;  // packets kept while waiting for metadata
   // PointCloud2.
-  CloudIntrinsicsSource cloud_intrinsics = CloudIntrinsicsSource::kSynthetic;
+  CloudIntrinsicsSource cloud_intrinsics = CloudIntrinsicsSource::kEstimate;
+  std::string sensor;     // sensor file (YAML, Ouster JSON) or a named model (sensor_catalog.h)
+  int estimate_clouds = 3;  // clouds the estimate is made from (intrinsics estimate)
   int rows = 64;
   int columns = 2048;
   double fov_up_deg = 3.0;  // KITTI's HDL-64E, as io::kittiHdl64Intrinsics

@@ -6,6 +6,7 @@
 #pragma once
 
 #include "range_image_mapping/LidarRangeImage.h"
+#include "range_image_mapping/point_cloud_layout.h"
 #include "range_image_mapping/point_cloud_projection.h"
 #include "range_image_mapping/range_image.h"
 #include "range_image_mapping/scan_motion.h"
@@ -68,14 +69,17 @@ void toPointCloud2(const RangeImage& image, const std_msgs::Header& header,
 void pointsToPointCloud2(const std::vector<Eigen::Vector3f>& points, const std::vector<float>* intensities,
                          const std_msgs::Header& header, sensor_msgs::PointCloud2& cloud);
 
-// PointCloud2 into the core's plain arrays. Fields x, y, z (float32 or float64)
-// are required; optional: intensity (any numeric type), ring (uint8 or uint16),
-// per-point time as t or time (uint32 nanoseconds, or float32/float64 seconds,
-// relative to the header stamp). Organized clouds (height > 1) keep their
-// layout. Throws MessageConversionError naming the field and its type for a
-// missing or unsupported field, and for sizes that disagree with the data.
-// Reuses input's buffers, so a converter called per scan does not allocate.
-void fromPointCloud2(const sensor_msgs::PointCloud2& cloud, PointCloudInput& input);
+// PointCloud2 into the core's plain arrays, read by the core's
+// readPointCloud (point_cloud_layout.h: the drivers' field names for
+// intensity, ring and per-point time, relative or absolute; no-return NaN and
+// (0, 0, 0) points kept and counted; input.stamp_ns the scan time from the
+// points' times, the header stamp without them). Organized clouds (height > 1)
+// keep their layout. Throws MessageConversionError naming the field and its
+// type for a missing or unsupported field, and for sizes that disagree with
+// the data. Reuses input's buffers, so a converter called per scan does not
+// allocate.
+void fromPointCloud2(const sensor_msgs::PointCloud2& cloud, PointCloudInput& input,
+                     PointCloudReadReport* report = nullptr);
 
 // ------------------------------------------------------------ motion
 
