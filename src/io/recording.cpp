@@ -118,8 +118,8 @@ void chooseCloudModel(Recording& recording, const RecordingOptions& options) {
   } else if (recording.kind == RecordingKind::kKittiVelodyne) {
     recording.model = std::make_shared<const LidarModel>(kittiHdl64Intrinsics());
     info.source = "KITTI's HDL-64E (synthetic)";
-    fix = "a folder of another sensor's scans is read with an estimated model when given without --kitti "
-          "(or give --sensor FILE)";
+    fix = "give this sensor's model with --sensor FILE (rim sensor estimate INPUT -o FILE estimates one), or "
+          "give the folder of scans itself without --kitti to have the model estimated";
   } else {
     if (clouds.empty()) throw RecordingError("INPUT " + recording.input + " has no scans to estimate a sensor model from");
     try {
@@ -233,8 +233,11 @@ void openOusterCapture(Recording& recording, const RecordingOptions& options, fs
 
 // The stamp of a file scan without times of its own: times.txt, else 10 Hz.
 uint64_t fileStamp(const Recording& recording, std::size_t frame) {
-  const double time_s = frame < recording.times_s.size() ? recording.times_s[frame] : 0.1 * double(frame);
-  return uint64_t(std::llround(std::max(time_s, 0.0) * 1e9));
+  const double time_s =
+      std::max(frame < recording.times_s.size() ? recording.times_s[frame] : 0.1 * double(frame), 0.0);
+  // Whole seconds apart: time_s * 1e9 in one double would round clock times to 256 ns.
+  const double seconds = std::floor(time_s);
+  return uint64_t(seconds) * 1000000000ull + uint64_t(std::llround((time_s - seconds) * 1e9));
 }
 
 void addStatistics(const ProjectionStatistics& scan, ProjectionStatistics& total) {
