@@ -1,6 +1,9 @@
-// rim decode: an Ouster pcap + metadata into one PLY cloud (lidar frame, with
-// the pixel each point came from) and one range-image PNG per complete scan.
+// rim decode: a recording into one PLY cloud (lidar frame, with the pixel each
+// point came from) and one range-image PNG per scan. An Ouster pcap keeps its
+// packet-level report (incomplete scans, dual returns, packet counts); every
+// other recording goes through io/recording with its sensor model.
 #include "commands.h"
+#include "outputs.h"
 
 #include "range_image_mapping/io/pcap_reader.h"
 #include "range_image_mapping/io/ply.h"
@@ -17,8 +20,7 @@ namespace range_image_mapping::tool {
 namespace {
 
 struct DecodeOptions {
-  std::string capture;
-  std::string metadata;
+  io::RecordingOptions recording;
   std::string output_directory;
   std::string return_name = "first";
   bool include_incomplete = false;
@@ -45,8 +47,62 @@ void writeScanPly(const std::string& path, const RangeImage& image) {
   io::writePlyPointCloud(path, points, properties);
 }
 
+void writeScanFiles(const std::string& stem, const RangeImage& image, int row_repeat) {
+  writeScanPly(stem + ".ply", image);
+  io::RangePngOptions png;
+  png.row_repeat = row_repeat;
+  io::writeRangeImagePng(stem + "_range.png", image, png);
+}
+
+// Any recording other than an Ouster pcap: its scans as the recording gives them.
+int runDecodeRecording(const DecodeOptions& options) {
+  if (options.return_name == "second")
+    throw std::invalid_argument("--return second needs an Ouster pcap of the dual-return profile");
+  const io::Recording recording = io::openRecording(options.recording);
+  std::cout << "decoding " << recording.description << "\n";
+  reportSensorModel(recording);
+  std::filesystem::create_directories(options.output_directory);
+  const int row_repeat = options.row_repeat > 0 ? options.row_repeat : std::max(1, 256 / recording.model->rows());
+  io::RecordingStatistics statistics;
+  int written = 0;
+  io::forEachScan(
+      recording,
+      [&](const RangeImage& image) {
+        char name[32];
+        std::snprintf(name, sizeof name, "scan_%06d", written);
+        const std::string stem = options.output_directory + "/" + name;
+        writeScanFiles(stem, image, row_repeat);
+        std::printf("%8d %9zu valid px  %s.ply, %s_range.png\n", written, image.validCount(), stem.c_str(),
+                    stem.c_str());
+        ++written;
+        return true;
+      },
+      &statistics);
+  const ProjectionStatistics& projection = statistics.projection;
+  if (projection.input_points > 0)
+    std::printf("%d scans written to %s; of %zu measured points %.1f %% kept, %.1f %% outside the model's field of "
+                "view, %.1f %% lost to a nearer point in the same pixel; %zu no-return points (NaN or at the "
+                "origin)\n",
+                written, options.output_directory.c_str(), projection.measured(),
+                100.0 * projection.keptFraction(),
+                projection.measured() ? 100.0 * projection.outside_model / projection.measured() : 0.0,
+                projection.measured() ? 100.0 * projection.occluded / projection.measured() : 0.0,
+                projection.non_finite + projection.no_return);
+  else
+    std::printf("%d scans written to %s\n", written, options.output_directory.c_str());
+  return written > 0 ? 0 : 3;
+}
+
+bool isOusterPcap(const io::RecordingOptions& recording) {
+  const std::filesystem::path input(recording.input);
+  return !recording.kitti && std::filesystem::is_regular_file(input) && input.extension() == ".pcap";
+}
+
 int runDecode(const DecodeOptions& options) {
-  const OusterMetadata metadata = loadOusterMetadata(options.metadata);
+  if (!isOusterPcap(options.recording)) return runDecodeRecording(options);
+  if (options.recording.metadata.empty())
+    throw std::invalid_argument("the pcap " + options.recording.input + " needs its Ouster metadata JSON (--metadata)");
+  const OusterMetadata metadata = loadOusterMetadata(options.recording.metadata);
   const bool second_return = options.return_name == "second";
   if (second_return && metadata.profile != UdpProfile::kRng19Rfl8Sig16Nir16Dual)
     throw std::invalid_argument("--return second needs the dual-return profile; this capture is " +
@@ -64,7 +120,7 @@ int runDecode(const DecodeOptions& options) {
               "max m", "files");
   int written = 0, skipped = 0;
   const io::OusterPcapStatistics statistics =
-      io::readOusterScans(options.capture, metadata, [&](const LidarScan& scan) {
+      io::readOusterScans(options.recording.input, metadata, [&](const LidarScan& scan) {
         const int received = static_cast<int>(scan.receivedColumns());
         if (received < window && !options.include_incomplete) {
           std::printf("%8u %4d/%-4d %s\n", scan.frame_id, received, window,
@@ -81,10 +137,7 @@ int runDecode(const DecodeOptions& options) {
         for (const uint64_t t : image.column_timestamp_ns)
           if (t) first_time = first_time ? std::min(first_time, t) : t, last_time = std::max(last_time, t);
         const std::string stem = options.output_directory + "/scan_" + std::to_string(scan.frame_id);
-        writeScanPly(stem + ".ply", image);
-        io::RangePngOptions png;
-        png.row_repeat = row_repeat;
-        io::writeRangeImagePng(stem + "_range.png", image, png);
+        writeScanFiles(stem, image, row_repeat);
         std::printf("%8u %4d/%-4d %9zu %10.2f %9.3f %9.3f  %s.ply, %s_range.png\n", scan.frame_id,
                     received, window, image.validCount(), (last_time - first_time) * 1e-6,
                     image.validCount() ? nearest : 0.0f, farthest, stem.c_str(), stem.c_str());
@@ -113,12 +166,9 @@ int runDecode(const DecodeOptions& options) {
 void addDecodeCommand(Command& rim) {
   auto options = std::make_shared<DecodeOptions>();
   Command& command = rim.subcommand(
-      "decode", "Decode an Ouster pcap: one PLY cloud (lidar frame, per-point row/col/range) and one "
-                "destaggered range-image PNG per complete scan");
-  command.option("capture", options->capture, "Ouster capture (.pcap)").required().check(existingFile());
-  command.option("--metadata,-m", options->metadata, "sensor metadata JSON (flat or nested)")
-      .required()
-      .check(existingFile());
+      "decode", "Decode a recording (Ouster pcap or packet bag, PointCloud2 bag, .bin/.pcd/.ply scans, KITTI): one "
+                "PLY cloud (lidar frame, per-point row/col/range) and one destaggered range-image PNG per scan");
+  addRecordingOptions(command, options->recording, kRecordingInputHelp, "decode only the first N scans");
   command.option("--out,-o", options->output_directory, "output directory").required();
   command.option("--return", options->return_name, "which return of a dual-return profile")
       .check(oneOf({"first", "second"}));
@@ -128,7 +178,7 @@ void addDecodeCommand(Command& rim) {
                  "repeat each PNG row this many times (default: 256 / beams)");
   command.callback([options] {
     const int status = runDecode(*options);
-    if (status != 0) throw CommandFailed("no complete scan in " + options->capture, status);
+    if (status != 0) throw CommandFailed("no complete scan in " + options->recording.input, status);
   });
 }
 

@@ -137,6 +137,7 @@ int runMap(const MapCommandOptions& options) {
 
   std::cerr << "mapping " << recording.description << " at " << poses.size() << " poses (" << poses_frame
             << " frame) from " << poses_path << "\n";
+  reportSensorModel(recording);
   StageTimes times;
   std::size_t scans = 0, integrated = 0, refused = 0, warnings = 0, blocks_refused = 0, blocks_dropped = 0;
   std::size_t points_used = 0;

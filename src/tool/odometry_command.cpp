@@ -44,6 +44,7 @@ int runOdometry(const OdometryCommandOptions& options) {
   OdometryFramesCsv frames_file(frames_path);
 
   std::cerr << "odometry over " << recording.description << "\n";
+  reportSensorModel(recording);
   std::vector<io::StampedPose> poses;
   std::vector<double> step_seconds;
   int frames = 0;

@@ -66,13 +66,22 @@ Json::Value OdometryCommandLine::json() const {
 void addRecordingOptions(Command& command, io::RecordingOptions& recording, const std::string& input_help,
                          const std::string& frames_help) {
   command.option("input", recording.input, input_help).required();
-  command.option("--metadata", recording.metadata, "Ouster metadata JSON of the pcap").check(existingFile());
+  command.option("--metadata,-m", recording.metadata, "Ouster metadata JSON of the pcap or packet bag")
+      .check(existingFile());
   command.flag("--kitti", recording.kitti, "INPUT is a KITTI velodyne folder (synthetic HDL-64E model)");
   command.option("--sensor", recording.sensor,
-                 "sensor file (YAML from rim sensor estimate, or Ouster metadata JSON) for a KITTI folder's clouds "
-                 "instead of the synthetic HDL-64E")
+                 "sensor file (YAML from rim sensor estimate, or Ouster metadata JSON) for point clouds (default: "
+                 "KITTI's HDL-64E for a KITTI folder, else estimated from the first scans)")
       .check(existingFile());
+  command.option("--topic", recording.topic,
+                 "the bag's topic to read: PointCloud2 or Ouster packets (default: the only one)");
   command.option("--frames", recording.frames, frames_help).check(positive());
+}
+
+void reportSensorModel(const io::Recording& recording) {
+  const io::RecordingModel& model = recording.model_info;
+  if (!model.summary.empty()) std::cerr << model.summary << "\n";
+  if (!model.warning.empty()) std::cerr << "warning: " << model.warning << "\n";
 }
 
 void addOdometryOptions(Command& command, OdometryCommandLine& odometry) {

@@ -24,12 +24,16 @@ std::string siblingPath(const std::string& output, const std::string& suffix);
 // Pretty JSON; creates the folder; throws naming the file when it cannot write.
 void writeJsonFile(const std::string& path, const Json::Value& value);
 
-// The recording to read (rim odometry, rim map, rim run): the positional
-// input, --metadata, --kitti and --frames.
+// The recording to read (rim odometry, rim map, rim run, rim decode): the
+// positional input, --metadata, --kitti, --sensor, --topic and --frames.
 constexpr const char* kRecordingInputHelp =
-    "a folder from rim simulate, an Ouster pcap (with --metadata) or a KITTI velodyne folder";
+    "an Ouster pcap (with --metadata), a ROS 1 bag (Ouster packets or PointCloud2), a folder of .bin, .pcd or "
+    ".ply scans (or one scan), a KITTI velodyne folder, or a folder from rim simulate";
 void addRecordingOptions(Command& command, io::RecordingOptions& recording, const std::string& input_help,
                          const std::string& frames_help);
+// Says once, on stderr, what the recording's sensor model is and how well it
+// explains the first clouds, with the warning when it explains too little.
+void reportSensorModel(const io::Recording& recording);
 
 // Odometry settings on the command line (rim odometry, rim run).
 struct OdometryCommandLine {

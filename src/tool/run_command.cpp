@@ -316,6 +316,7 @@ int runPipeline(RunCommandOptions options, const Command& command) {
   std::cerr << "odometry and mapping over " << recording.description << " (" << environment << ": voxel "
             << options.map.grid.voxel_size_m << " m, range clip " << options.map.integrator.max_range_m
             << " m); Ctrl-C stops and saves\n";
+  reportSensorModel(recording);
 
   RunRecord run = runScans(pipeline, recording, out);
   std::vector<io::StampedPose> lidar_poses = run.poses;  // in the odometry's world: the lidar at the first scan

@@ -3,6 +3,7 @@
 // file, with how well it explains the clouds. rim sensor check: how well a
 // sensor file explains a recording.
 #include "commands.h"
+#include "outputs.h"
 
 #include "range_image_mapping/io/kitti.h"
 #include "range_image_mapping/io/recording.h"
@@ -27,33 +28,31 @@ struct SensorCommandOptions {
   std::string metadata;
   std::string output;
   std::string sensor;  // rim sensor check
+  std::string topic;
   int frames = 5;
   int columns = 0;
   bool no_beam_origin = false;
   bool no_ring = false;
 };
 
-// The recording's first frames as the plain clouds a driver would give: a
-// KITTI .bin file or folder as stored, Ouster scans unprojected with their
-// metadata (lidar frame).
+// The recording's first frames as the plain clouds a driver would give: point
+// clouds (KITTI, .bin/.pcd/.ply files, a PointCloud2 bag) as stored, Ouster
+// scans unprojected with their metadata (lidar frame).
 std::vector<PointCloudInput> readClouds(const SensorCommandOptions& options, std::string* description) {
   std::vector<PointCloudInput> clouds;
-  if (fs::is_regular_file(options.input) && fs::path(options.input).extension() == ".bin") {
-    clouds.push_back(io::readKittiVelodyne(options.input));
-    *description = "KITTI scan " + options.input;
-    return clouds;
-  }
   io::RecordingOptions recording_options;
   recording_options.input = options.input;
   recording_options.metadata = options.metadata;
+  recording_options.topic = options.topic;
   recording_options.frames = options.frames;
-  // A folder without an Ouster capture is read as KITTI scans (*.bin).
-  recording_options.kitti = fs::is_directory(options.input) && !fs::exists(fs::path(options.input) / "capture.pcap");
+  recording_options.choose_model = false;
   const io::Recording recording = io::openRecording(recording_options);
   *description = recording.description;
-  if (recording.kind == io::RecordingKind::kKittiVelodyne) {
-    for (std::size_t i = 0; i < recording.velodyne_files.size() && int(i) < options.frames; ++i)
-      clouds.push_back(io::readKittiVelodyne(recording.velodyne_files[i]));
+  if (io::isPointCloudRecording(recording.kind)) {
+    io::forEachCloud(recording, [&](const PointCloudInput& cloud) {
+      clouds.push_back(cloud);
+      return true;
+    });
     return clouds;
   }
   io::forEachScan(recording, [&](const RangeImage& image) {
@@ -115,9 +114,8 @@ void runCheck(const SensorCommandOptions& options) {
 }
 
 void addInputOptions(Command& command, SensorCommandOptions& options) {
-  command.option("input", options.input,
-                 "a KITTI velodyne folder or .bin scan, an Ouster pcap (or a rim simulate folder)")
-      .required();
+  command.option("input", options.input, kRecordingInputHelp).required();
+  command.option("--topic", options.topic, "the bag's topic to read (default: the only PointCloud2 or packet one)");
   command.option("--metadata,-m", options.metadata, "Ouster metadata JSON of a pcap (default: metadata.json beside it)")
       .check(existingFile());
   command.option("--frames", options.frames, "use the first N scans").check(positive()).showDefault();
