@@ -72,5 +72,20 @@ TEST_F(OdometryCommand, AKittiFolderTakesASensorFile) {
   EXPECT_NE(test::readText(path("k/est_summary.json")).find("\"frames\" : 3"), std::string::npos);
 }
 
+// --sensor takes a catalog name as well as a file: KITTI's HDL-64E by name is
+// the model a KITTI folder gets anyway, to the bit; a name that is neither a
+// file nor in the catalog is refused with the names that are.
+TEST_F(OdometryCommand, ANamedSensorIsTheCatalogModel) {
+  ASSERT_EQ(rim("simulate --preset kitti_like --frames 3 --out " + path("n")).exit_code, 0);
+  ASSERT_EQ(rim("odometry " + path("n") + " --kitti --out " + path("n/default.txt")).exit_code, 0);
+  test::RunResult run = rim("odometry " + path("n") + " --kitti --sensor hdl-64e --out " + path("n/named.txt"));
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  EXPECT_EQ(test::readText(path("n/named.txt")), test::readText(path("n/default.txt")));
+  run = rim("odometry " + path("n") + " --kitti --sensor VLP-99 --out " + path("n/unknown.txt"));
+  EXPECT_NE(run.exit_code, 0);
+  EXPECT_NE(run.err.find("VLP-99"), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find("VLP-16"), std::string::npos) << run.err;
+}
+
 }  // namespace
 }  // namespace range_image_mapping

@@ -70,9 +70,9 @@ void addRecordingOptions(Command& command, io::RecordingOptions& recording, cons
       .check(existingFile());
   command.flag("--kitti", recording.kitti, "INPUT is a KITTI velodyne folder (synthetic HDL-64E model)");
   command.option("--sensor", recording.sensor,
-                 "sensor file (YAML from rim sensor estimate, or Ouster metadata JSON) for point clouds (default: "
-                 "KITTI's HDL-64E for a KITTI folder, else estimated from the first scans)")
-      .check(existingFile());
+                 "sensor file (YAML from rim sensor estimate, or Ouster metadata JSON) or named model (VLP-16, "
+                 "HDL-64E, ...: see the README) for point clouds (default: KITTI's HDL-64E for a KITTI folder, "
+                 "else estimated from the first scans)");
   command.option("--topic", recording.topic,
                  "the bag's topic to read: PointCloud2 or Ouster packets (default: the only one)");
   command.option("--frames", recording.frames, frames_help).check(positive());

@@ -139,7 +139,7 @@ void addSensorCommand(Command& rim) {
 
   Command& check = sensor.subcommand("check", "How well a sensor file (YAML, or Ouster metadata JSON) explains "
                                               "a recording's point clouds");
-  check.option("sensor", options->sensor, "sensor file").required().check(existingFile());
+  check.option("sensor", options->sensor, "sensor file, or a named model (VLP-16, HDL-64E, ...)").required();
   addInputOptions(check, *options);
   check.callback([options] { runCheck(*options); });
 }
