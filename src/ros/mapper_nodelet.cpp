@@ -345,13 +345,21 @@ void MapperNodelet::onMeshTimer(const ros::SteadyTimerEvent&) {
     return;
   }
   deferred_in_a_row_ = 0;
+  // Nobody listens: no meshing (save_mesh meshes what it needs, and the map
+  // meshes blocks before the memory radius drops them).
+  if (mesh_publisher_.getNumSubscribers() == 0 && surface_points_publisher_.getNumSubscribers() == 0) {
+    mesh_markers_->forgetSubscribers();  // the next subscriber needs all of it
+    return;
+  }
   try {
     updateMesh();
     const std::size_t triangles = map().mesh().triangleCount();
     if (triangles > parameters_.triangle_warning && triangle_log_.allow(60.0))
-      NODELET_WARN("the mesh has %zu triangles (more than triangle_warning %zu): rviz slows down; a larger "
-                   "voxel_size or a memory_radius keeps it smaller",
-                   triangles, parameters_.triangle_warning);
+      NODELET_WARN("the mesh has %zu triangles (more than triangle_warning %zu), the markers show %zu "
+                   "(display_triangle_budget %zu, 0: all); a larger voxel_size or a memory_radius keeps the map "
+                   "smaller",
+                   triangles, parameters_.triangle_warning, mesh_markers_->shownTriangles(),
+                   parameters_.display_triangle_budget);
     if (mesh_publisher_.getNumSubscribers() == 0)
       mesh_markers_->forgetSubscribers();  // nobody holds the mesh: the next subscriber needs all of it
     else

@@ -116,7 +116,8 @@ std::optional<PoseLookup> PoseSource::lookUpOdometry(const WaitingScan& waiting,
   // The odometry poses scans in order: a later one posed means this one never will be.
   if (last_odometry_stamp_ > scan.header.stamp)
     return PoseLookup{std::nullopt,
-                      "the odometry posed a later scan and not this one (it skipped or dropped it)",
+                      "no odometry for this scan, and one for a later scan came: the Odometry skipped this one, "
+                      "or the odometry subscriber queue (queue_size) was full",
                       NoPoseReason::kSkipped};
   if (waited_s < parameters_.pose_timeout_s) return std::nullopt;
   return PoseLookup{std::nullopt,

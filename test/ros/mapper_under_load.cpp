@@ -71,7 +71,7 @@ struct MapperStatus {
 TEST(MapperUnderLoad, EveryScanReachesTheOdometryAndTheMap) {
   ros::NodeHandle node, private_node("~");
   const int frames = private_node.param("frames", 300);
-  const double timeout_s = private_node.param("timeout", 240.0);
+  const double timeout_s = private_node.param("timeout", 420.0);
 
   std::set<double> odometry_stamps;
   ros::Subscriber odometry_subscriber = node.subscribe<nav_msgs::Odometry>(

@@ -40,7 +40,7 @@ enum class NoPoseReason {
   kNone,          // it has a pose
   kQueueFull,     // queue_size newer scans were waiting: the oldest goes
   kTimedOut,      // its pose did not come within pose_timeout
-  kSkipped,       // the odometry posed a later scan and not this one (it skipped or dropped it)
+  kSkipped,       // an odometry message for a later scan came, none for this one
   kUnusable,      // a pose came and cannot be used (wrong frame, failed lookup)
 };
 
