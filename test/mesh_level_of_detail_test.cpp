@@ -152,12 +152,27 @@ PiecedTerrain piecedTerrain() {
 
 MeshLevelOfDetail::Key keyOf(const std::tuple<int, int>& ij) { return {std::get<0>(ij), std::get<1>(ij), 0}; }
 
-// Every piece of the terrain in a level of detail at the test's voxel size.
+// Every piece of the terrain in a level of detail at the test's voxel size,
+// with the box it was cut from.
 MeshLevelOfDetail levelOfDetail(const PiecedTerrain& terrain, LevelOfDetailOptions options) {
   options.voxel_size_m = kVoxel;
   MeshLevelOfDetail lod(options);
-  for (const auto& [ij, mesh] : terrain.pieces) lod.setPiece(keyOf(ij), mesh);
+  for (const auto& [ij, mesh] : terrain.pieces) {
+    const auto [i, j] = ij;
+    const Eigen::AlignedBox3f region(Eigen::Vector3f(float(i * 3.2), float(j * 3.2), -100.0f),
+                                     Eigen::Vector3f(float((i + 1) * 3.2), float((j + 1) * 3.2), 100.0f));
+    lod.setPiece(keyOf(ij), mesh, region);
+  }
   return lod;
+}
+
+// The shown vertices of a piece on the plane x = x_m, as (y, z), sorted.
+std::vector<std::pair<float, float>> verticesAtX(const TriangleMesh& mesh, float x_m) {
+  std::vector<std::pair<float, float>> result;
+  for (const Eigen::Vector3f& vertex : mesh.vertices)
+    if (std::abs(vertex.x() - x_m) <= 1e-5f) result.emplace_back(vertex.y(), vertex.z());
+  std::sort(result.begin(), result.end());
+  return result;
 }
 
 TEST(MeshLevelOfDetail, KeepsTheBudgetAndNearPiecesFiner) {
@@ -206,6 +221,30 @@ TEST(MeshLevelOfDetail, KeepsTheBudgetAndNearPiecesFiner) {
   EXPECT_TRUE(lod.update(viewpoint).empty());
   EXPECT_FALSE(lod.update(Eigen::Vector3f(47.0f, 47.0f, 2.0f)).empty());
   EXPECT_LE(lod.shownTriangles(), options.triangle_budget);
+}
+
+TEST(MeshLevelOfDetail, PiecesAtDifferentLevelsMeetWithoutCracks) {
+  const PiecedTerrain full = piecedTerrain();
+  LevelOfDetailOptions options;
+  options.full_detail_distance_m = 1.0;
+  MeshLevelOfDetail lod = levelOfDetail(full, options);
+  lod.update(Eigen::Vector3f(0.5f, 1.6f, 1.0f));
+  // Levels 0, 2 and 3 side by side along x.
+  ASSERT_EQ(lod.levelOf(keyOf({0, 0})), 0);
+  ASSERT_GE(lod.levelOf(keyOf({1, 0})), 1);
+  ASSERT_GT(lod.levelOf(keyOf({2, 0})), lod.levelOf(keyOf({1, 0})));
+  for (int i = 0; i < 2; ++i) {
+    const float border = float((i + 1) * 3.2);
+    const auto left = verticesAtX(*lod.shown(keyOf({i, 0})), border);
+    const auto right = verticesAtX(*lod.shown(keyOf({i + 1, 0})), border);
+    EXPECT_GE(left.size(), 30u) << "the border at x = " << border << " lost its vertices";
+    EXPECT_EQ(left, right) << "pieces " << i << " and " << i + 1 << " do not share their border";
+  }
+  // And the coarse pieces stay within their bound of the full surface.
+  const int level = lod.levelOf(keyOf({2, 0}));
+  EXPECT_LE(largestDistance(*lod.shown(keyOf({2, 0})), full.pieces.at({2, 0}), 0.02),
+            std::sqrt(3.0) * kVoxel * std::ldexp(1.0, level) + 0.02);
+  EXPECT_LT(lod.shown(keyOf({2, 0}))->triangles.size(), full.pieces.at({2, 0}).triangles.size() / 4);
 }
 
 TEST(MeshLevelOfDetail, WithoutBudgetNearPiecesAreFull) {

@@ -30,7 +30,8 @@ double cellSize(const LevelOfDetailOptions& options, int level) { return options
 
 }  // namespace
 
-TriangleMesh clusterVertices(const TriangleMesh& mesh, double cell_size_m) {
+TriangleMesh clusterVertices(const TriangleMesh& mesh, double cell_size_m,
+                             const std::optional<Eigen::AlignedBox3f>& border) {
   if (!(cell_size_m >= 0.0) || !std::isfinite(cell_size_m))
     throw std::invalid_argument("clusterVertices: the cell size must be finite and not negative, not " +
                                 std::to_string(cell_size_m));
@@ -43,7 +44,13 @@ TriangleMesh clusterVertices(const TriangleMesh& mesh, double cell_size_m) {
   const bool with_normals = mesh.normals.size() == mesh.vertices.size();
   const bool with_intensities = mesh.intensities.size() == mesh.vertices.size();
 
-  // Each input vertex's cluster, clusters in order of first appearance.
+  constexpr float kOnBorder_m = 1e-5f;
+  const auto onBorder = [&](const Eigen::Vector3f& vertex) {
+    return border && (((vertex - border->min()).array().abs() <= kOnBorder_m).any() ||
+                      ((vertex - border->max()).array().abs() <= kOnBorder_m).any());
+  };
+  // Each input vertex's cluster, clusters in order of first appearance; a
+  // vertex on the border is a cluster of its own.
   std::unordered_map<Eigen::Vector3i, int, CellHash> cluster_of_cell;
   std::vector<int> cluster_of_vertex(mesh.vertices.size());
   std::vector<Eigen::Vector3d> position_sums, normal_sums;
@@ -51,15 +58,17 @@ TriangleMesh clusterVertices(const TriangleMesh& mesh, double cell_size_m) {
   std::vector<int> counts;
   for (int i = 0; i < vertex_count; ++i) {
     const Eigen::Vector3f& vertex = mesh.vertices[i];
-    const Eigen::Vector3i cell = (vertex.cast<double>() / cell_size_m).array().floor().cast<int>();
-    const auto [entry, added] = cluster_of_cell.try_emplace(cell, int(counts.size()));
-    if (added) {
+    int cluster = int(counts.size());
+    if (!onBorder(vertex)) {
+      const Eigen::Vector3i cell = (vertex.cast<double>() / cell_size_m).array().floor().cast<int>();
+      cluster = cluster_of_cell.try_emplace(cell, cluster).first->second;
+    }
+    if (cluster == int(counts.size())) {
       position_sums.emplace_back(Eigen::Vector3d::Zero());
       normal_sums.emplace_back(Eigen::Vector3d::Zero());
       intensity_sums.push_back(0.0);
       counts.push_back(0);
     }
-    const int cluster = entry->second;
     cluster_of_vertex[i] = cluster;
     position_sums[cluster] += vertex.cast<double>();
     if (with_normals) normal_sums[cluster] += mesh.normals[i].cast<double>();
@@ -117,7 +126,7 @@ std::size_t MeshLevelOfDetail::KeyHash::operator()(const Key& key) const { retur
 
 MeshLevelOfDetail::MeshLevelOfDetail(LevelOfDetailOptions options) : options_(options) { options_.validate(); }
 
-void MeshLevelOfDetail::setPiece(const Key& key, TriangleMesh mesh) {
+void MeshLevelOfDetail::setPiece(const Key& key, TriangleMesh mesh, const std::optional<Eigen::AlignedBox3f>& region) {
   if (mesh.triangles.empty()) {
     removePiece(key);
     return;
@@ -125,6 +134,7 @@ void MeshLevelOfDetail::setPiece(const Key& key, TriangleMesh mesh) {
   Piece& piece = pieces_[key];
   if (!piece.levels.empty()) full_triangles_ -= piece.levels.front().triangles.size();
   piece.bounds = mesh.bounds();
+  piece.region = region;
   full_triangles_ += mesh.triangles.size();
   piece.levels.clear();
   piece.levels.push_back(std::move(mesh));
@@ -151,7 +161,7 @@ const TriangleMesh& MeshLevelOfDetail::level(Piece& piece, int level) const {
   // of clusterVertices holds against the full mesh.
   while (int(piece.levels.size()) <= level) {
     const int next = int(piece.levels.size());
-    piece.levels.push_back(clusterVertices(piece.levels.back(), cellSize(options_, next)));
+    piece.levels.push_back(clusterVertices(piece.levels.back(), cellSize(options_, next), piece.region));
   }
   return piece.levels[level];
 }

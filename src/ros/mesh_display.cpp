@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <optional>
 #include <utility>
 
 namespace range_image_mapping {
@@ -72,6 +73,7 @@ void MeshMarkers::forgetSubscribers() {
 std::vector<MeshMarkers::Message> MeshMarkers::update(const mapping::MeshExtractor& mesh,
                                                       const Eigen::Vector3f& viewpoint) {
   visualization_msgs::MarkerArray first;
+  const bool full = full_resend_;
   if (full_resend_) {
     // DELETEALL first, so whatever a subscriber held (before a reset, from an
     // earlier run) goes, then every chunk that has triangles.
@@ -83,13 +85,25 @@ std::vector<MeshMarkers::Message> MeshMarkers::update(const mapping::MeshExtract
       if (!chunk->triangles.empty()) changed_.insert(chunkOf(chunk->key));
     first.markers.push_back(deleteAll());
   }
-  for (const ChunkKey& key : changed_) level_of_detail_.setPiece(key, chunkMesh(key, mesh));
+  // A chunk's lattice box: its faces are where its neighbours' triangles
+  // meet its own. From lattice coordinates, as marching cubes places its
+  // vertices, so a vertex on a face has the face's very bits.
+  const int64_t chunk_voxels = int64_t(parameters_.marker_chunk_blocks) * parameters_.map.grid.block_edge;
+  const double voxel_m = parameters_.map.grid.voxel_size_m;
+  for (const ChunkKey& key : changed_) {
+    const Eigen::Matrix<int64_t, 3, 1> lower = key.cast<int64_t>() * chunk_voxels;
+    const Eigen::Matrix<int64_t, 3, 1> upper = lower + Eigen::Matrix<int64_t, 3, 1>::Constant(chunk_voxels);
+    level_of_detail_.setPiece(key, chunkMesh(key, mesh),
+                              Eigen::AlignedBox3f((lower.cast<double>() * voxel_m).cast<float>(),
+                                                  (upper.cast<double>() * voxel_m).cast<float>()));
+  }
   changed_.clear();
-  std::vector<Message> messages = markersOf(level_of_detail_.update(viewpoint), std::move(first));
-  const auto count = boost::make_shared<visualization_msgs::MarkerArray>();
-  count->markers.push_back(countMarker(viewpoint));
-  messages.push_back(count);
-  return messages;
+  const std::vector<ChunkKey> shown_changed = level_of_detail_.update(viewpoint);
+  // The count goes with the chunks, and alone only when it changed.
+  std::optional<visualization_msgs::Marker> count = countMarker(viewpoint);
+  if (!full && shown_changed.empty() && count->text == last_count_text_) count.reset();
+  if (count) last_count_text_ = count->text;
+  return markersOf(shown_changed, std::move(first), std::move(count));
 }
 
 MeshMarkers::Message MeshMarkers::clear() {
@@ -137,7 +151,8 @@ TriangleMesh MeshMarkers::chunkMesh(const ChunkKey& key, const mapping::MeshExtr
 }
 
 std::vector<MeshMarkers::Message> MeshMarkers::markersOf(const std::vector<ChunkKey>& chunks,
-                                                         visualization_msgs::MarkerArray markers) {
+                                                         visualization_msgs::MarkerArray markers,
+                                                         std::optional<visualization_msgs::Marker> last) {
   std::vector<Message> messages;
   std::size_t triangles = 0;
   const auto send = [&] {
@@ -151,6 +166,7 @@ std::vector<MeshMarkers::Message> MeshMarkers::markersOf(const std::vector<Chunk
     appendChunkMarker(key, markers, triangles);
     if (triangles >= kTrianglesPerMessage) send();
   }
+  if (last) markers.markers.push_back(std::move(*last));
   send();
   return messages;
 }

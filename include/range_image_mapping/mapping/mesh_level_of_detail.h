@@ -14,6 +14,7 @@
 
 #include <cstddef>
 #include <memory>
+#include <optional>
 #include <unordered_map>
 #include <vector>
 
@@ -25,9 +26,13 @@ namespace range_image_mapping::mapping {
 // three cells is kept once. Every point of the result lies within
 // sqrt(3) * cell_size_m of the input surface (each kept triangle is a
 // corner-wise move of an input triangle by at most a cell's diagonal).
-// cell_size_m 0 returns the mesh as it is. Throws std::invalid_argument for a
-// negative or non-finite cell size or a triangle index out of range.
-TriangleMesh clusterVertices(const TriangleMesh& mesh, double cell_size_m);
+// cell_size_m 0 returns the mesh as it is. Vertices on a face of `border`
+// (within 1e-5 m) keep their exact place, so pieces of a mesh cut along those
+// faces still meet without cracks whatever cells each was clustered into.
+// Throws std::invalid_argument for a negative or non-finite cell size or a
+// triangle index out of range.
+TriangleMesh clusterVertices(const TriangleMesh& mesh, double cell_size_m,
+                             const std::optional<Eigen::AlignedBox3f>& border = std::nullopt);
 
 struct LevelOfDetailOptions {
   // Level 0 is the mesh as it is; level L clusters into cells of
@@ -56,7 +61,9 @@ class MeshLevelOfDetail {
   explicit MeshLevelOfDetail(LevelOfDetailOptions options);
 
   // A piece's full mesh (replacing what it had); an empty mesh removes it.
-  void setPiece(const Key& key, TriangleMesh mesh);
+  // region: the box the piece was cut from; its vertices on the box's faces,
+  // which the neighbouring pieces share, keep their place at every level.
+  void setPiece(const Key& key, TriangleMesh mesh, const std::optional<Eigen::AlignedBox3f>& region = std::nullopt);
   void removePiece(const Key& key);
   void clear();
 
@@ -76,6 +83,7 @@ class MeshLevelOfDetail {
   struct Piece {
     std::vector<TriangleMesh> levels;  // built on demand, each from the one before
     Eigen::AlignedBox3f bounds;
+    std::optional<Eigen::AlignedBox3f> region;
     int shown_level = -1;  // -1: not shown
     bool changed = true;
   };

@@ -18,6 +18,8 @@
 
 #include <boost/shared_ptr.hpp>
 
+#include <optional>
+#include <string>
 #include <unordered_set>
 #include <vector>
 
@@ -41,8 +43,8 @@ class MeshMarkers {
   // viewpoint (the sensor): the chunks whose shown mesh changed (new
   // triangles, or a new level as the sensor moved; a DELETE for a chunk that
   // lost its triangles or that the budget leaves out), or after
-  // requestFullResend a DELETEALL and every shown chunk; then a text marker
-  // with the triangle counts. Messages are split past kTrianglesPerMessage,
+  // requestFullResend a DELETEALL and every shown chunk; last a text marker
+  // with the triangle counts (alone only when they changed). Messages are split past kTrianglesPerMessage,
   // so rviz and the transport never see one huge message on a full re-send.
   std::vector<Message> update(const mapping::MeshExtractor& mesh, const Eigen::Vector3f& viewpoint);
   // Triangles in the markers rviz holds after the last update.
@@ -60,8 +62,10 @@ class MeshMarkers {
   // The chunk's full mesh for display: its blocks' triangles at or below
   // display_max_height.
   TriangleMesh chunkMesh(const ChunkKey& key, const mapping::MeshExtractor& mesh) const;
-  // The chunks' shown meshes as markers, split into messages.
-  std::vector<Message> markersOf(const std::vector<ChunkKey>& chunks, visualization_msgs::MarkerArray markers);
+  // The chunks' shown meshes as markers after `markers`, split into
+  // messages, `last` at the end.
+  std::vector<Message> markersOf(const std::vector<ChunkKey>& chunks, visualization_msgs::MarkerArray markers,
+                                 std::optional<visualization_msgs::Marker> last);
   // The chunk's shown triangles as one marker (ADD), or a DELETE when it has
   // none and rviz holds it; nothing for a chunk that is empty and never was sent.
   void appendChunkMarker(const ChunkKey& key, visualization_msgs::MarkerArray& markers, std::size_t& triangles);
@@ -72,6 +76,7 @@ class MeshMarkers {
   MapperParameters parameters_;
   mapping::MeshLevelOfDetail level_of_detail_;  // every chunk's full mesh and shown level
   ChunkSet changed_, published_;  // changed since their last publication; held by rviz
+  std::string last_count_text_;   // of the count marker last sent
   bool full_resend_ = true;
 };
 
