@@ -9,8 +9,12 @@
 # usage: scripts/screenshot_rviz.sh [OUT.png]   (default out/rviz_mapping.png)
 # Needs the workspace sourced (devel/setup.bash), Xvfb and ImageMagick's import.
 # Environment: FRAMES (default 60), PRESET (indoor_cart), RATE (0.25),
-# ENVIRONMENT (indoor), DISPLAY_NUMBER (99), ROS_PORT (11399), KEEP_LOGS (unset:
-# the temporary folder with the sequence and the logs is removed).
+# ENVIRONMENT (indoor), RVIZ_CONFIG (rviz/mapping.rviz; rviz/mapping_outdoor.rviz
+# follows the sensor from farther away), DISPLAY_NUMBER (99), ROS_PORT (11399),
+# KEEP_LOGS (unset: the temporary folder with the sequence and the logs is
+# removed). The README's outdoor screenshot:
+#   PRESET=outdoor_car FRAMES=300 ENVIRONMENT=outdoor RVIZ_CONFIG=rviz/mapping_outdoor.rviz \
+#     scripts/screenshot_rviz.sh doc/rviz_outdoor_live_mesh.png
 set -euo pipefail
 
 out=${1:-out/rviz_mapping.png}
@@ -18,6 +22,7 @@ frames=${FRAMES:-60}
 preset=${PRESET:-indoor_cart}
 rate=${RATE:-0.25}
 environment=${ENVIRONMENT:-indoor}
+rviz_config=${RVIZ_CONFIG:-}
 display_number=${DISPLAY_NUMBER:-99}
 ros_port=${ROS_PORT:-11399}
 
@@ -35,6 +40,10 @@ rim=$(catkin_find --first-only --libexec range_image_mapping rim) ||
   fail "display :${display_number} is in use (/tmp/.X${display_number}-lock); set DISPLAY_NUMBER"
 mkdir -p "$(dirname "$out")"
 out=$(realpath "$out")
+if [ -n "$rviz_config" ]; then
+  [ -f "$rviz_config" ] || fail "RVIZ_CONFIG $rviz_config does not exist"
+  rviz_config=$(realpath "$rviz_config")
+fi
 
 work=$(mktemp -d /tmp/rim_screenshot.XXXXXX)
 xvfb_pid=""
@@ -66,7 +75,8 @@ export ROS_MASTER_URI="http://localhost:${ros_port}"
 export ROS_LOG_DIR="$work/ros_log"
 echo "replaying through mapping.launch with rviz (log: $work/launch.log) ..."
 roslaunch -p "$ros_port" range_image_mapping mapping.launch bag_file:="$work/sequence/packets.bag" \
-  rate:="$rate" environment:="$environment" rviz:=true >"$work/launch.log" 2>&1 &
+  rate:="$rate" environment:="$environment" rviz:=true ${rviz_config:+rviz_config:="$rviz_config"} \
+  >"$work/launch.log" 2>&1 &
 launch_pid=$!
 
 # The replay is over when roslaunch reports that rosbag play has finished.
@@ -89,3 +99,4 @@ sleep 6  # two mesh updates and a few rviz frames
 
 DISPLAY=":${display_number}" import -window root "$out"
 echo "screenshot: $out"
+grep -o 'mapper: .*triangles ([0-9]* shown)[^"]*' "$work/launch.log" | tail -1 || true

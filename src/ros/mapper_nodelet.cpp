@@ -8,7 +8,9 @@
 // need no locks. Nothing thrown by bad input leaves a callback: it is counted
 // and logged (throttled). Integration happens in the scan callback, meshing
 // only in the mesh timer, so a slow mesh never delays a scan by more than one
-// timer callback.
+// timer callback, and while the Mapper is behind (its last scan entered the
+// map more than mesh_defer_latency after its stamp) mesh updates wait, so
+// under load integration keeps up and the mesh slows.
 #include "range_image_mapping/LidarRangeImage.h"
 #include "range_image_mapping/SaveMesh.h"
 #include "range_image_mapping/io/mesh_file.h"
@@ -22,8 +24,6 @@
 #include "range_image_mapping/ros/wall_clock_diagnostics.h"
 
 #include <diagnostic_updater/diagnostic_updater.h>
-#include <message_filters/subscriber.h>
-#include <message_filters/time_synchronizer.h>
 #include <nav_msgs/Odometry.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
@@ -53,25 +53,48 @@ struct MapperStatistics {
   std::size_t scans = 0;           // range images received
   std::size_t integrated = 0;      // given to the map and integrated
   std::size_t refused = 0;         // given to the map and refused (pose jump, bad pose, unusable image)
-  std::size_t dropped_no_pose = 0;  // no tf in time, queue full, no base -> lidar transform, wrong frame
+  // Without a pose (PoseSource), by reason.
+  std::size_t dropped_queue_full = 0, dropped_timed_out = 0, dropped_skipped = 0, dropped_unusable = 0;
+  std::size_t missing_upstream = 0;  // gaps in the frame counter: lost before the Mapper
   std::size_t rejected = 0;        // messages that could not be converted
   double integration_seconds = 0.0;  // wall time in TsdfMap::integrate
-  std::size_t mesh_updates = 0;
+  double pose_wait_seconds = 0.0;    // wall time scans waited for their pose
+  std::size_t posed = 0;             // scans answered with a pose (pose_wait_seconds' count)
+  double latency_seconds = 0.0;      // scan stamp to integrated (ROS time), summed over `latencies`
+  std::size_t latencies = 0;
+  std::size_t mesh_updates = 0, mesh_deferred = 0;
   double mesh_seconds = 0.0;  // wall time in TsdfMap::updateMesh
+
+  std::size_t droppedNoPose() const {
+    return dropped_queue_full + dropped_timed_out + dropped_skipped + dropped_unusable;
+  }
 
   MapperStatistics operator-(const MapperStatistics& earlier) const {
     MapperStatistics d;
     d.scans = scans - earlier.scans;
     d.integrated = integrated - earlier.integrated;
     d.refused = refused - earlier.refused;
-    d.dropped_no_pose = dropped_no_pose - earlier.dropped_no_pose;
+    d.dropped_queue_full = dropped_queue_full - earlier.dropped_queue_full;
+    d.dropped_timed_out = dropped_timed_out - earlier.dropped_timed_out;
+    d.dropped_skipped = dropped_skipped - earlier.dropped_skipped;
+    d.dropped_unusable = dropped_unusable - earlier.dropped_unusable;
+    d.missing_upstream = missing_upstream - earlier.missing_upstream;
     d.rejected = rejected - earlier.rejected;
     d.integration_seconds = integration_seconds - earlier.integration_seconds;
+    d.pose_wait_seconds = pose_wait_seconds - earlier.pose_wait_seconds;
+    d.posed = posed - earlier.posed;
+    d.latency_seconds = latency_seconds - earlier.latency_seconds;
+    d.latencies = latencies - earlier.latencies;
     d.mesh_updates = mesh_updates - earlier.mesh_updates;
+    d.mesh_deferred = mesh_deferred - earlier.mesh_deferred;
     d.mesh_seconds = mesh_seconds - earlier.mesh_seconds;
     return d;
   }
 };
+
+// Mesh updates in a row that wait while the Mapper is behind: the mesh still
+// moves under sustained load.
+constexpr int kMaxDeferredMeshUpdates = 5;
 
 double secondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -102,12 +125,10 @@ class MapperNodelet : public nodelet::Nodelet {
 
  private:
   using ImageConstPtr = LidarRangeImage::ConstPtr;
-  using Synchronizer = message_filters::TimeSynchronizer<LidarRangeImage, nav_msgs::Odometry>;
 
-  // Scans in: to the pose source, which answers each with its pose (onScanPose).
+  // Scans (and odometry) in: to the pose source, which answers each scan
+  // with its pose or why none (onScanPose).
   void onRangeImage(const ImageConstPtr& message);
-  void onRangeImageWithOdometry(const ImageConstPtr& message, const nav_msgs::Odometry::ConstPtr& odometry);
-  void onUnmatchedImage(const ImageConstPtr& message);
   void onScanPose(const LidarRangeImage& message, const PoseLookup& lookup);
 
   void integrate(const LidarRangeImage& message, const LidarPose& pose);
@@ -131,16 +152,20 @@ class MapperNodelet : public nodelet::Nodelet {
   std::unique_ptr<MeshMarkers> mesh_markers_;
   LidarModelCache models_;
 
-  ros::Subscriber range_image_subscriber_;  // pose_source tf
-  std::unique_ptr<message_filters::Subscriber<LidarRangeImage>> synchronized_image_subscriber_;
-  std::unique_ptr<message_filters::Subscriber<nav_msgs::Odometry>> odometry_subscriber_;
-  std::unique_ptr<Synchronizer> synchronizer_;
+  ros::Subscriber range_image_subscriber_, odometry_subscriber_;
   ros::Publisher mesh_publisher_, surface_points_publisher_;
   ros::ServiceServer save_mesh_service_, reset_service_, republish_mesh_service_;
   ros::SteadyTimer mesh_timer_, statistics_timer_;
   std::unique_ptr<WallClockDiagnostics> diagnostics_;
 
   ros::Time last_scan_stamp_;  // of the last scan with a pose
+  Eigen::Vector3f sensor_position_ = Eigen::Vector3f::Zero();  // of the last scan integrated: the display's viewpoint
+  std::optional<uint32_t> last_frame_counter_;  // LidarRangeImage::frame_id of the last scan received
+  double last_latency_s_ = 0.0;                 // of the last scan integrated
+  int deferred_in_a_row_ = 0;
+  // Diagnostics window maxima (reset by diagnose).
+  double max_latency_s_ = 0.0;
+  std::size_t max_waiting_ = 0;
 
   MapperStatistics statistics_;
   StatisticsWindow<MapperStatistics> log_window_, diagnostics_window_;
@@ -186,27 +211,14 @@ void MapperNodelet::onInit() {
   mesh_timer_ = node.createSteadyTimer(ros::WallDuration(1.0 / parameters_.mesh_rate_hz),
                                        &MapperNodelet::onMeshTimer, this);
 
-  std::string image_topic;
-  if (parameters_.pose_source == PoseSourceType::kTf) {
-    range_image_subscriber_ =
-        node.subscribe("range_image", parameters_.queue_size, &MapperNodelet::onRangeImage, this);
-    image_topic = range_image_subscriber_.getTopic();
-  } else {
-    synchronized_image_subscriber_ =
-        std::make_unique<message_filters::Subscriber<LidarRangeImage>>(node, "range_image", parameters_.queue_size);
-    odometry_subscriber_ =
-        std::make_unique<message_filters::Subscriber<nav_msgs::Odometry>>(node, "odometry", parameters_.queue_size);
-    synchronizer_ = std::make_unique<Synchronizer>(*synchronized_image_subscriber_, *odometry_subscriber_,
-                                                   parameters_.queue_size);
-    synchronizer_->registerCallback(
-        boost::bind(&MapperNodelet::onRangeImageWithOdometry, this, boost::placeholders::_1, boost::placeholders::_2));
-    // An image that leaves the synchronizer's queue unmatched had no odometry
-    // (skipped by the Odometry, or the queue is too short for its latency).
-    synchronizer_->registerDropCallback(boost::bind(&MapperNodelet::onUnmatchedImage, this, boost::placeholders::_1));
-    image_topic = synchronized_image_subscriber_->getTopic();
-  }
+  range_image_subscriber_ = node.subscribe("range_image", parameters_.queue_size, &MapperNodelet::onRangeImage, this);
+  if (parameters_.pose_source == PoseSourceType::kOdometry)
+    odometry_subscriber_ = node.subscribe<nav_msgs::Odometry>(
+        "odometry", parameters_.queue_size,
+        [this](const nav_msgs::Odometry::ConstPtr& odometry) { pose_source_->addOdometry(odometry); });
+  const std::string image_topic = range_image_subscriber_.getTopic();
   std::string poses = pose_source_->description();
-  if (odometry_subscriber_) poses += ", odometry on " + odometry_subscriber_->getTopic();
+  if (odometry_subscriber_) poses += ", odometry on " + odometry_subscriber_.getTopic();
   const mapping::TsdfMapOptions& map = parameters_.map;
   NODELET_INFO("Mapper: range images from %s, poses from %s, mesh on %s in %s; voxel %.3f m, blocks of %d^3, "
                "truncation %.3f m, range [%.1f, %.1f] m, %s",
@@ -222,26 +234,34 @@ void MapperNodelet::onInit() {
 
 void MapperNodelet::onRangeImage(const ImageConstPtr& message) {
   ++statistics_.scans;
+  // A gap in the sensor's counter: scans lost before the Mapper (the
+  // Odometry's own drops, which it reports, or this subscriber's full queue).
+  if (last_frame_counter_ && message->frame_id > *last_frame_counter_ + 1) {
+    const std::size_t missing = message->frame_id - *last_frame_counter_ - 1;
+    statistics_.missing_upstream += missing;
+    if (drop_log_.allow(1.0))
+      NODELET_WARN("%zu scans before scan %u never reached the Mapper (%zu so far): dropped by the Odometry, or "
+                   "by a full subscriber queue (queue_size %d)",
+                   missing, message->frame_id, statistics_.missing_upstream, parameters_.queue_size);
+  }
+  last_frame_counter_ = message->frame_id;
   pose_source_->addScan(message);
-}
-
-void MapperNodelet::onRangeImageWithOdometry(const ImageConstPtr& message,
-                                             const nav_msgs::Odometry::ConstPtr& odometry) {
-  ++statistics_.scans;
-  pose_source_->addScan(message, *odometry);
-}
-
-void MapperNodelet::onUnmatchedImage(const ImageConstPtr& message) {
-  if (!message) return;  // an odometry message without its image
-  ++statistics_.scans;
-  dropScan(*message, "no odometry with the same stamp");
+  max_waiting_ = std::max(max_waiting_, pose_source_->waitingCount());
 }
 
 void MapperNodelet::onScanPose(const LidarRangeImage& message, const PoseLookup& lookup) {
   if (!lookup.pose) {
+    switch (lookup.no_pose) {
+      case NoPoseReason::kQueueFull: ++statistics_.dropped_queue_full; break;
+      case NoPoseReason::kTimedOut: ++statistics_.dropped_timed_out; break;
+      case NoPoseReason::kSkipped: ++statistics_.dropped_skipped; break;
+      default: ++statistics_.dropped_unusable; break;
+    }
     dropScan(message, lookup.reason);
     return;
   }
+  ++statistics_.posed;
+  statistics_.pose_wait_seconds += lookup.waited_s;
   try {
     integrate(message, *lookup.pose);
   } catch (const std::exception& error) {
@@ -252,11 +272,10 @@ void MapperNodelet::onScanPose(const LidarRangeImage& message, const PoseLookup&
 }
 
 void MapperNodelet::dropScan(const LidarRangeImage& message, const std::string& reason) {
-  ++statistics_.dropped_no_pose;
   last_warning_ = reason;
   if (drop_log_.allow(1.0))
-    NODELET_WARN("scan %u stamped %.3f not mapped: %s (%zu dropped so far)", message.frame_id,
-                 message.header.stamp.toSec(), reason.c_str(), statistics_.dropped_no_pose);
+    NODELET_WARN("scan %u stamped %.3f not mapped: %s (%zu without pose so far)", message.frame_id,
+                 message.header.stamp.toSec(), reason.c_str(), statistics_.droppedNoPose());
 }
 
 // ------------------------------------------------------------ integration
@@ -278,7 +297,19 @@ void MapperNodelet::integrate(const LidarRangeImage& message, const LidarPose& l
   given.world_from_lidar = lidar_pose.world_from_lidar;
   given.twist = lidar_pose.twist;
   const pipeline::ScanResult result = pipeline_->process(image, given);
-  if (result.has_pose) last_scan_stamp_ = message.header.stamp;
+  if (result.has_pose) {
+    last_scan_stamp_ = message.header.stamp;
+    sensor_position_ = lidar_pose.world_from_lidar.translation().cast<float>();
+    // Scan-to-map latency on the ROS clock (the bag's in a replay). A stamp
+    // from another clock (an unsynchronised sensor) gives nonsense: left out.
+    const double latency_s = (ros::Time::now() - message.header.stamp).toSec();
+    if (latency_s > -1.0 && latency_s < 3600.0) {
+      last_latency_s_ = latency_s;
+      statistics_.latency_seconds += latency_s;
+      ++statistics_.latencies;
+      max_latency_s_ = std::max(max_latency_s_, latency_s);
+    }
+  }
   statistics_.integration_seconds += result.integrate_seconds;
   mapping::MapUpdate update;
   if (result.map) update = *result.map;
@@ -306,17 +337,34 @@ void MapperNodelet::updateMesh() {
 }
 
 void MapperNodelet::onMeshTimer(const ros::SteadyTimerEvent&) {
+  // Behind: the scans waiting in the subscriber queue come first.
+  if (parameters_.mesh_defer_latency_s > 0.0 && last_latency_s_ > parameters_.mesh_defer_latency_s &&
+      deferred_in_a_row_ < kMaxDeferredMeshUpdates) {
+    ++deferred_in_a_row_;
+    ++statistics_.mesh_deferred;
+    return;
+  }
+  deferred_in_a_row_ = 0;
+  // Nobody listens: no meshing (save_mesh meshes what it needs, and the map
+  // meshes blocks before the memory radius drops them).
+  if (mesh_publisher_.getNumSubscribers() == 0 && surface_points_publisher_.getNumSubscribers() == 0) {
+    mesh_markers_->forgetSubscribers();  // the next subscriber needs all of it
+    return;
+  }
   try {
     updateMesh();
     const std::size_t triangles = map().mesh().triangleCount();
     if (triangles > parameters_.triangle_warning && triangle_log_.allow(60.0))
-      NODELET_WARN("the mesh has %zu triangles (more than triangle_warning %zu): rviz slows down; a larger "
-                   "voxel_size or a memory_radius keeps it smaller",
-                   triangles, parameters_.triangle_warning);
+      NODELET_WARN("the mesh has %zu triangles (more than triangle_warning %zu), the markers show %zu "
+                   "(display_triangle_budget %zu, 0: all); a larger voxel_size or a memory_radius keeps the map "
+                   "smaller",
+                   triangles, parameters_.triangle_warning, mesh_markers_->shownTriangles(),
+                   parameters_.display_triangle_budget);
     if (mesh_publisher_.getNumSubscribers() == 0)
       mesh_markers_->forgetSubscribers();  // nobody holds the mesh: the next subscriber needs all of it
     else
-      for (const MeshMarkers::Message& message : mesh_markers_->update(map().mesh())) mesh_publisher_.publish(message);
+      for (const MeshMarkers::Message& message : mesh_markers_->update(map().mesh(), sensor_position_))
+        mesh_publisher_.publish(message);
     if (surface_points_publisher_.getNumSubscribers() > 0) publishSurfacePoints();
   } catch (const std::exception& error) {
     if (error_log_.allow(parameters_.statistics_period_s)) NODELET_ERROR("mesh update failed: %s", error.what());
@@ -387,26 +435,44 @@ void MapperNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
   status.add("scans received", window.scans);
   status.add("scans integrated", window.integrated);
   status.add("scans refused", window.refused);
-  status.add("scans without pose", window.dropped_no_pose);
+  status.add("scans without pose", window.droppedNoPose());
+  status.add("dropped: pose queue full", window.dropped_queue_full);
+  status.add("dropped: pose timed out", window.dropped_timed_out);
+  status.add("dropped: skipped by the odometry", window.dropped_skipped);
+  status.add("dropped: unusable pose", window.dropped_unusable);
+  status.add("scans lost before the mapper", window.missing_upstream);
   status.add("rejected messages", window.rejected);
+  status.add("scans waiting for a pose", pose_source_->waitingCount());
+  status.add("max scans waiting for a pose", max_waiting_);
+  status.add("mean pose wait (ms)", window.posed > 0 ? 1e3 * window.pose_wait_seconds / double(window.posed) : 0.0);
+  status.add("mean scan-to-map latency (ms)",
+             window.latencies > 0 ? 1e3 * window.latency_seconds / double(window.latencies) : 0.0);
+  status.add("max scan-to-map latency (ms)", 1e3 * max_latency_s_);
+  max_latency_s_ = 0.0;
+  max_waiting_ = pose_source_->waitingCount();
   status.add("mean integration (ms)",
              window.integrated + window.refused > 0
                  ? 1e3 * window.integration_seconds / double(window.integrated + window.refused)
                  : 0.0);
   status.add("mean mesh update (ms)",
              window.mesh_updates > 0 ? 1e3 * window.mesh_seconds / double(window.mesh_updates) : 0.0);
+  status.add("mesh updates deferred (behind)", window.mesh_deferred);
+  status.add("total scans received", statistics_.scans);
+  status.add("total scans without pose", statistics_.droppedNoPose());
+  status.add("total scans lost before the mapper", statistics_.missing_upstream);
   status.add("total scans integrated", map_statistics.scans_integrated);
   status.add("total scans refused", map_statistics.scans_refused);
   status.add("blocks", map_statistics.blocks);
   status.add("memory (MB)", double(map_statistics.memory_bytes) / (1024.0 * 1024.0));
   status.add("triangles", map_statistics.triangles);
+  status.add("triangles shown", mesh_markers_->shownTriangles());
   status.add("last warning", last_warning_);
   if (window.scans == 0)
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "no range images");
   else if (window.integrated == 0)
     status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "nothing integrated: " + last_warning_);
-  else if (window.refused + window.dropped_no_pose + window.rejected > 0)
-    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "scans refused or without pose");
+  else if (window.refused + window.droppedNoPose() + window.rejected + window.missing_upstream > 0)
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "scans refused, without pose or lost before the mapper");
   else
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, "mapping");
 }
@@ -416,12 +482,16 @@ void MapperNodelet::onStatisticsTimer(const ros::SteadyTimerEvent&) {
   if (window.scans == 0 || period <= 0.0) return;
   const mapping::MapStatistics map_statistics = map().statistics();
   const std::size_t given = window.integrated + window.refused;
-  NODELET_INFO("mapper: %.1f Hz, %.1f ms per scan; integrated %zu, refused %zu, without pose %zu, rejected %zu; "
-               "%zu blocks, %.1f MB, %zu triangles, %.1f ms per mesh update",
+  NODELET_INFO("mapper: %.1f Hz, %.1f ms per scan, %.0f ms scan-to-map; integrated %zu, refused %zu, without pose "
+               "%zu, lost before %zu, rejected %zu; %zu blocks, %.1f MB, %zu triangles (%zu shown), %.1f ms per mesh "
+               "update, %zu deferred",
                double(window.integrated) / period, given > 0 ? 1e3 * window.integration_seconds / double(given) : 0.0,
-               window.integrated, window.refused, window.dropped_no_pose, window.rejected, map_statistics.blocks,
-               double(map_statistics.memory_bytes) / (1024.0 * 1024.0), map_statistics.triangles,
-               window.mesh_updates > 0 ? 1e3 * window.mesh_seconds / double(window.mesh_updates) : 0.0);
+               window.latencies > 0 ? 1e3 * window.latency_seconds / double(window.latencies) : 0.0,
+               window.integrated, window.refused, window.droppedNoPose(), window.missing_upstream, window.rejected,
+               map_statistics.blocks, double(map_statistics.memory_bytes) / (1024.0 * 1024.0),
+               map_statistics.triangles, mesh_markers_->shownTriangles(),
+               window.mesh_updates > 0 ? 1e3 * window.mesh_seconds / double(window.mesh_updates) : 0.0,
+               window.mesh_deferred);
 }
 
 }  // namespace range_image_mapping

@@ -372,7 +372,10 @@ MapperParameters readMapperParameters(const ros::NodeHandle& private_node) {
                                : PoseSourceType::kTf;
   parameters.deskew = reader.getBool("deskew", defaults.deskew);
   parameters.max_time_gap_s = reader.getDouble("max_time_gap", defaults.max_time_gap_s, 1e-3, 3600.0);
-  parameters.tf_timeout_s = reader.getDouble("tf_timeout", defaults.tf_timeout_s, 0.0, 60.0);
+  if (private_node.hasParam("tf_timeout"))
+    throw ParameterError("parameter " + private_node.resolveName("tf_timeout") +
+                         " is now pose_timeout (it applies to both pose sources): rename it");
+  parameters.pose_timeout_s = reader.getDouble("pose_timeout", defaults.pose_timeout_s, 0.0, 600.0);
   parameters.lidar_transform_timeout_s =
       reader.getDouble("lidar_transform_timeout", defaults.lidar_transform_timeout_s, 0.0, 600.0);
   parameters.queue_size = reader.getInt("queue_size", defaults.queue_size, 1, 1000);
@@ -390,6 +393,12 @@ MapperParameters readMapperParameters(const ros::NodeHandle& private_node) {
   parameters.marker_chunk_blocks = reader.getInt("marker_chunk_blocks", defaults.marker_chunk_blocks, 1, 64);
   parameters.display_max_height_m = reader.getDouble("display_max_height", defaults.display_max_height_m, -1e4,
                                                      std::numeric_limits<double>::infinity());
+  parameters.display_full_detail_distance_m = reader.getDouble(
+      "display_full_detail_distance", defaults.display_full_detail_distance_m, 0.0, 1e6);
+  parameters.display_triangle_budget = static_cast<std::size_t>(reader.getInt(
+      "display_triangle_budget", static_cast<int>(defaults.display_triangle_budget), 0, kAnyInt));
+  parameters.mesh_defer_latency_s =
+      reader.getDouble("mesh_defer_latency", defaults.mesh_defer_latency_s, 0.0, 3600.0);
   parameters.triangle_warning = static_cast<std::size_t>(
       reader.getInt("triangle_warning", static_cast<int>(defaults.triangle_warning), 0, kAnyInt));
   parameters.statistics_period_s =

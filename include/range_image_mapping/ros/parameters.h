@@ -141,9 +141,14 @@ struct MapperParameters {
   // with the twist between consecutive poses (tf).
   bool deskew = true;
   double max_time_gap_s = 0.5;  // tf: poses farther apart give no twist (a gap, a restart)
-  double tf_timeout_s = 0.5;    // wall time a scan waits for its tf before it is dropped
+  // Wall time a scan waits for its pose (tf, or the odometry message with its
+  // stamp) before it is dropped, counted and warned about.
+  double pose_timeout_s = 1.0;
   double lidar_transform_timeout_s = 2.0;  // odometry source: wall time to wait for base -> lidar
-  int queue_size = 8;                      // range images (and odometry) waiting
+  // Scans waiting for their pose, and the subscribers' queues (range images,
+  // odometry): past it the oldest waiting scan is dropped, counted and warned
+  // about. 30 is 3 s of a 10 Hz sensor.
+  int queue_size = 30;
   // Mesh output.
   double mesh_rate_hz = 1.0;
   MeshColorMode color_mode = MeshColorMode::kHeight;
@@ -155,6 +160,16 @@ struct MapperParameters {
   // this world z are left out, so rviz shows rooms without their ceilings.
   // The map and saved meshes keep everything.
   double display_max_height_m = std::numeric_limits<double>::infinity();
+  // Markers only: chunks nearer the sensor than this are shown at full
+  // resolution, each doubling of the distance coarsens them one level
+  // (mapping::MeshLevelOfDetail); 0: full resolution until the budget.
+  double display_full_detail_distance_m = 15.0;
+  // Markers only: most triangles shown; everything coarsens until it fits (0: no budget).
+  std::size_t display_triangle_budget = 1'000'000;
+  // Mesh updates wait while the Mapper is behind: the last scan integrated
+  // was older than this (scan-to-map latency), at most kMaxDeferredMeshUpdates
+  // in a row. 0: never wait.
+  double mesh_defer_latency_s = 0.5;
   std::size_t triangle_warning = 3'000'000;  // warn once the mesh passes this many triangles
   double statistics_period_s = 10.0;         // period of the log summary
 };

@@ -19,6 +19,7 @@
 #include <Eigen/Geometry>
 
 #include <deque>
+#include <map>
 #include <functional>
 #include <memory>
 #include <optional>
@@ -34,43 +35,69 @@ struct LidarPose {
   std::optional<Twist> twist;
 };
 
+// Why a scan got no pose.
+enum class NoPoseReason {
+  kNone,          // it has a pose
+  kQueueFull,     // queue_size newer scans were waiting: the oldest goes
+  kTimedOut,      // its pose did not come within pose_timeout
+  kSkipped,       // an odometry message for a later scan came, none for this one
+  kUnusable,      // a pose came and cannot be used (wrong frame, failed lookup)
+};
+
 // A scan's pose, or why it has none.
 struct PoseLookup {
   std::optional<LidarPose> pose;
   std::string reason;  // when there is no pose
+  NoPoseReason no_pose = NoPoseReason::kNone;
+  double waited_s = 0.0;  // wall time the scan waited for its pose
 };
 
+// Scans wait for their pose in a bounded queue, in arrival order: a scan's
+// pose exists only after the Odometry registered that scan, and under load
+// its message comes late. A scan leaves with its pose, or dropped with the
+// reason (queue full, timed out, skipped by the odometry); never silently.
 class PoseSource {
  public:
   using Answer = std::function<void(const LidarRangeImage& scan, const PoseLookup& lookup)>;
 
   // node: the nodelet's (single-threaded) node handle, whose queue runs the
-  // retries of scans waiting for tf; logger_name: the nodelet's name. Uses
-  // world_frame, pose_source, tf_timeout, lidar_transform_timeout and
+  // retries of waiting scans; logger_name: the nodelet's name. Uses
+  // world_frame, pose_source, pose_timeout, lidar_transform_timeout and
   // queue_size of parameters.
   PoseSource(ros::NodeHandle& node, const MapperParameters& parameters, const std::string& logger_name,
              Answer answer);
   PoseSource(const PoseSource&) = delete;  // the timer holds this object's address
   PoseSource& operator=(const PoseSource&) = delete;
 
-  // pose_source tf: world_frame -> the scan's frame at its stamp. The scan
-  // waits, in arrival order, until tf has it (the Odometry publishes it after
-  // processing the same scan), at most tf_timeout of wall time; past
-  // queue_size waiting scans the oldest is given up.
+  // A scan in. pose_source tf: world_frame -> the scan's frame at its stamp,
+  // once tf has it (the Odometry publishes it after processing the same
+  // scan). pose_source odometry: the odometry message with the scan's stamp
+  // (addOdometry, before or after the scan), composed with base -> lidar from
+  // tf (LidarMount). Scans are answered in arrival order; one waits at most
+  // pose_timeout of wall time; past queue_size waiting scans the oldest is
+  // given up.
   void addScan(const LidarRangeImage::ConstPtr& scan);
-  // pose_source odometry: the odometry message with the scan's stamp (the
-  // Mapper's synchronizer pairs them), composed with base -> lidar from tf
-  // (LidarMount). Answered at once.
-  void addScan(const LidarRangeImage::ConstPtr& scan, const nav_msgs::Odometry& odometry);
-  // Forgets the scans waiting for tf, unanswered (a map reset).
-  void clear() { waiting_.clear(); }
+  // pose_source odometry: the pose of the scan with this stamp. Kept until
+  // that scan comes (at most queue_size messages).
+  void addOdometry(const nav_msgs::Odometry::ConstPtr& odometry);
+  // Forgets the waiting scans, unanswered, and the odometry (a map reset).
+  void clear();
+  std::size_t waitingCount() const { return waiting_.size(); }
 
   // Where the poses come from, for the start-up log.
   std::string description() const;
 
  private:
+  struct WaitingScan {
+    LidarRangeImage::ConstPtr scan;
+    ros::SteadyTime arrived;
+  };
   void answerWaitingScans();
-  PoseLookup fromOdometry(const LidarRangeImage& scan, const nav_msgs::Odometry& odometry);
+  // The scan's pose or why none; nullopt: keep waiting.
+  std::optional<PoseLookup> lookUpTf(const WaitingScan& waiting, double waited_s);
+  std::optional<PoseLookup> lookUpOdometry(const WaitingScan& waiting, double waited_s);
+  // nullopt while base -> lidar is not on tf yet.
+  std::optional<PoseLookup> fromOdometry(const LidarRangeImage& scan, const nav_msgs::Odometry& odometry);
 
   MapperParameters parameters_;
   Answer answer_;
@@ -78,11 +105,9 @@ class PoseSource {
   tf2_ros::TransformListener tf_listener_;
   LidarMount mount_;
 
-  struct WaitingScan {
-    LidarRangeImage::ConstPtr scan;
-    ros::SteadyTime arrived;
-  };
   std::deque<WaitingScan> waiting_;
+  std::map<ros::Time, nav_msgs::Odometry::ConstPtr> odometry_;  // by stamp, for scans yet to come
+  ros::Time last_odometry_stamp_;  // of the odometry message received last
   ros::SteadyTimer retry_timer_;
 };
 

@@ -1,0 +1,134 @@
+// 300 simulated OS1-128 scans through range_image_mapping.launch at rate 1
+// while a child process of this test keeps one core busy: every scan must
+// reach the odometry and every scan the map. The Mapper's diagnostics
+// (tsdf_mapper) give its totals and, when a scan is lost, the reason; the
+// figures under load (scan-to-map latency, scans waiting for a pose, mesh
+// updates deferred) are printed for the record.
+#include "rostest_main.h"
+#include "spin_until.h"
+
+#include <diagnostic_msgs/DiagnosticArray.h>
+#include <gtest/gtest.h>
+#include <nav_msgs/Odometry.h>
+#include <ros/ros.h>
+
+#include <signal.h>
+#include <sys/prctl.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <map>
+#include <set>
+#include <string>
+
+namespace range_image_mapping {
+namespace {
+
+using test::spinUntil;
+
+// A process that spins until killed: one core's worth of load.
+class BusyCore {
+ public:
+  BusyCore() {
+    pid_ = fork();
+    if (pid_ == 0) {
+      prctl(PR_SET_PDEATHSIG, SIGKILL);  // also when the test itself is killed (time limit)
+      if (getppid() == 1) _exit(0);
+      volatile unsigned long counter = 0;
+      for (;;) counter = counter + 1;
+    }
+  }
+  ~BusyCore() {
+    if (pid_ > 0) {
+      kill(pid_, SIGKILL);
+      waitpid(pid_, nullptr, 0);
+    }
+  }
+  bool running() const { return pid_ > 0 && kill(pid_, 0) == 0; }
+
+ private:
+  pid_t pid_ = -1;
+};
+
+// The Mapper's status values, the last message's and the largest seen.
+struct MapperStatus {
+  std::map<std::string, std::string> last;
+  std::map<std::string, double> largest;
+  std::size_t messages = 0;
+
+  double value(const std::string& key) const {
+    const auto found = last.find(key);
+    return found == last.end() ? -1.0 : std::stod(found->second);
+  }
+  double peak(const std::string& key) const {
+    const auto found = largest.find(key);
+    return found == largest.end() ? -1.0 : found->second;
+  }
+};
+
+TEST(MapperUnderLoad, EveryScanReachesTheOdometryAndTheMap) {
+  ros::NodeHandle node, private_node("~");
+  const int frames = private_node.param("frames", 300);
+  const double timeout_s = private_node.param("timeout", 420.0);
+
+  std::set<double> odometry_stamps;
+  ros::Subscriber odometry_subscriber = node.subscribe<nav_msgs::Odometry>(
+      "/odometry", 1000,
+      [&](const nav_msgs::Odometry::ConstPtr& message) { odometry_stamps.insert(message->header.stamp.toSec()); });
+  MapperStatus mapper;
+  double deferred = 0.0;
+  ros::Subscriber diagnostics_subscriber = node.subscribe<diagnostic_msgs::DiagnosticArray>(
+      "/diagnostics", 100, [&](const diagnostic_msgs::DiagnosticArray::ConstPtr& message) {
+        for (const diagnostic_msgs::DiagnosticStatus& status : message->status) {
+          if (status.hardware_id != "tsdf_mapper") continue;
+          ++mapper.messages;
+          for (const diagnostic_msgs::KeyValue& entry : status.values) {
+            mapper.last[entry.key] = entry.value;
+            try {
+              double& largest = mapper.largest.try_emplace(entry.key, -1e300).first->second;
+              largest = std::max(largest, std::stod(entry.value));
+            } catch (const std::exception&) {
+              // a text value (last warning)
+            }
+          }
+          deferred += mapper.value("mesh updates deferred (behind)");
+        }
+      });
+
+  const BusyCore busy;  // from before the replay starts to the end
+  ASSERT_TRUE(busy.running());
+  const bool done = spinUntil(
+      [&] {
+        return int(odometry_stamps.size()) >= frames && mapper.value("total scans integrated") >= frames;
+      },
+      timeout_s);
+  // The last diagnostics after the replay: nothing more comes in.
+  spinUntil([] { return false; }, 3.0);
+
+  std::printf("under load: %zu odometry messages; mapper: %s scans received, %s integrated, %s without pose, %s lost "
+              "before; max scan-to-map latency %.0f ms, max scans waiting for a pose %.0f, mean pose wait up to "
+              "%.1f ms, %.0f mesh updates deferred, mean integration up to %.1f ms, triangles %s (%s shown)\n",
+              odometry_stamps.size(), mapper.last["total scans received"].c_str(),
+              mapper.last["total scans integrated"].c_str(), mapper.last["total scans without pose"].c_str(),
+              mapper.last["total scans lost before the mapper"].c_str(), mapper.peak("max scan-to-map latency (ms)"),
+              mapper.peak("max scans waiting for a pose"), mapper.peak("mean pose wait (ms)"), deferred,
+              mapper.peak("mean integration (ms)"), mapper.last["triangles"].c_str(),
+              mapper.last["triangles shown"].c_str());
+  EXPECT_TRUE(done) << "not every scan arrived within " << timeout_s << " s; last warning: "
+                    << mapper.last["last warning"];
+  EXPECT_EQ(int(odometry_stamps.size()), frames) << "scans posed by the odometry";
+  EXPECT_EQ(mapper.value("total scans received"), frames);
+  EXPECT_EQ(mapper.value("total scans integrated"), frames) << "last warning: " << mapper.last["last warning"];
+  EXPECT_EQ(mapper.value("total scans without pose"), 0.0) << "last warning: " << mapper.last["last warning"];
+  EXPECT_EQ(mapper.value("total scans lost before the mapper"), 0.0);
+  EXPECT_TRUE(busy.running()) << "the busy process ended early: the load was not there all along";
+}
+
+}  // namespace
+}  // namespace range_image_mapping
+
+int main(int argc, char** argv) {
+  return range_image_mapping::test::runRostestNode(argc, argv, "mapper_under_load");
+}
