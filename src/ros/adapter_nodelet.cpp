@@ -67,15 +67,6 @@ void accumulate(BatcherStatistics& total, const BatcherStatistics& part) {
   total.missing_columns += part.missing_columns;
 }
 
-void accumulate(ProjectionStatistics& total, const ProjectionStatistics& part) {
-  total.input_points += part.input_points;
-  total.non_finite += part.non_finite;
-  total.no_return += part.no_return;
-  total.outside_model += part.outside_model;
-  total.occluded += part.occluded;
-  total.kept += part.kept;
-}
-
 // The image destaggered (as the scene looks) for rviz's Image display: mono16
 // millimetres, 0 = no return as the sensor sends it; ranges past 65.535 m
 // saturate. rviz scales it with the display's min and max.
@@ -560,7 +551,7 @@ void AdapterNodelet::projectAndPublish(PointCloudInput& cloud, const std_msgs::H
   ProjectionStatistics statistics;
   const RangeImage image = ring_to_row_.empty() ? projectPointCloud(cloud, cloud_model_, &statistics)
                                                 : projectPointCloud(cloud, cloud_model_, ring_to_row_, &statistics);
-  accumulate(projection_statistics_, statistics);
+  projection_statistics_ += statistics;
   checkModelFit(statistics);
   publish(image, header);
 }
@@ -605,7 +596,7 @@ bool AdapterNodelet::estimateCloudModel(const PointCloudInput& cloud, const std_
 // The first clouds of a model given by the settings: does it explain them?
 void AdapterNodelet::checkModelFit(const ProjectionStatistics& statistics) {
   if (fit_check_clouds_ >= std::size_t(parameters_.estimate_clouds)) return;
-  accumulate(fit_check_statistics_, statistics);
+  fit_check_statistics_ += statistics;
   if (++fit_check_clouds_ < std::size_t(parameters_.estimate_clouds)) return;
   const std::string parameter = parameters_.cloud_intrinsics == CloudIntrinsicsSource::kSensor   ? "sensor"
                                 : parameters_.cloud_intrinsics == CloudIntrinsicsSource::kOuster ? "metadata_file"

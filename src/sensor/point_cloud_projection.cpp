@@ -272,4 +272,15 @@ RingIntrinsics intrinsicsFromRings(const PointCloudInput& cloud, int columns) {
   return result;
 }
 
+ProjectionStatistics& ProjectionStatistics::operator+=(const ProjectionStatistics& other) {
+  input_points += other.input_points;
+  non_finite += other.non_finite;
+  no_return += other.no_return;
+  outside_model += other.outside_model;
+  occluded += other.occluded;
+  kept += other.kept;
+  max_ray_distance_m = std::max(max_ray_distance_m, other.max_ray_distance_m);
+  return *this;
+}
+
 }  // namespace range_image_mapping
