@@ -336,6 +336,8 @@ void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion,
       }
     model.projectMany(buffers.moved_points.data(), voxels, buffers.pixels.data(), buffers.hits.data());
     for (i = 0; i < voxels; ++i) {
+      // A miss here is a voxel off the vertical field of view by more than
+      // the sensor moved between the two columns: it is left out.
       if (!buffers.hits[i]) continue;
       buffers.frame_points[i] = buffers.moved_points[i];
       if (!motion.settled(centre_column, buffers.pixels[i].column)) buffers.pending[pending++] = uint32_t(i);
