@@ -36,6 +36,7 @@
 #include "range_image_mapping/io/recording.h"
 #include "range_image_mapping/pipeline/scan_to_map_pipeline.h"
 #include "range_image_mapping/registration/lidar_odometry.h"
+#include "list_argument.h"
 #include "machine_info.h"
 #include "test_data.h"
 
@@ -61,6 +62,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
+using benchmark_support::splitList;
 
 constexpr const char* kKittiRaw = "kitti-raw-22";
 constexpr const char* kKitti00 = "kitti00-94-95";
@@ -82,14 +84,6 @@ struct Options {
   std::string poses;   // write each system's poses (TUM) into this folder; "" = none
   double kiss_indoor_range_m = 20.0;  // KISS-ICP's max range (and voxel = 1/100 of it) indoors
 };
-
-std::vector<std::string> splitList(const std::string& text) {
-  std::vector<std::string> items;
-  std::stringstream stream(text);
-  for (std::string item; std::getline(stream, item, ',');)
-    if (!item.empty()) items.push_back(item);
-  return items;
-}
 
 std::string shellQuoted(const std::string& text) {
   std::string quoted = "'";

@@ -18,6 +18,7 @@
 #include "machine_info.h"
 #include "octomap_baseline.h"
 #include "simulated_mapping_sequence.h"
+#include "timing.h"
 
 #include "range_image_mapping/evaluation/surface_metrics.h"
 #include "range_image_mapping/mapping/marching_cubes.h"
@@ -38,23 +39,9 @@
 namespace range_image_mapping {
 namespace {
 
-using Clock = std::chrono::steady_clock;
 using namespace benchmark_support;
 constexpr int kThreads = 2;
 
-double secondsSince(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
-
-// Wall and CPU time of one call.
-struct Timer {
-  Clock::time_point wall_start = Clock::now();
-  double cpu_start = processCpuSeconds();
-  double wall() const { return secondsSince(wall_start); }
-  double cpu() const { return processCpuSeconds() - cpu_start; }
-};
-
-double mean(const std::vector<double>& values) {
-  return values.empty() ? 0.0 : std::accumulate(values.begin(), values.end(), 0.0) / double(values.size());
-}
 double median(std::vector<double> values) {
   if (values.empty()) return 0.0;
   std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
@@ -75,12 +62,6 @@ struct Row {
   evaluation::SurfaceMetrics metrics[3];  // at kThresholdVoxels
   double scene_precision = 0.0, scene_f_score = 0.0;  // at 3 voxels, precision against the whole scene
 };
-
-double percentile(std::vector<double> values, double share) {
-  if (values.empty()) return 0.0;
-  std::sort(values.begin(), values.end());
-  return values[std::min(values.size() - 1, std::size_t(share * double(values.size())))];
-}
 
 void printHeader() {
   std::printf("%-12s %-14s %7s %7s %6s %7s %8s %8s %8s %8s %8s %8s %8s %7s %6s %6s %6s %6s %6s %6s %6s\n",

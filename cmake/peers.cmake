@@ -7,16 +7,21 @@
 #
 #   kiss_icp_comparison_benchmark (benchmark/kiss_icp_comparison.cpp): KISS-ICP
 #     1.2.3 and our odometry on the same scans, threads and run.
+#   vdbfusion_comparison_benchmark (benchmark/vdbfusion_comparison.cpp):
+#     VDBFusion 0.1.6 and our TSDF mapping on the same scans and run.
 #
 # Sophus (header-only, no Debian package) is configured and installed into
 # <build>/peers/sophus at configure time; KISS-ICP's C++ library is added as a
 # subdirectory built in <build>/peers/kiss_icp with downloads off. Core-only
 # builds build the program with `all`; catkin builds only on request
 # (catkin_make kiss_icp_comparison_benchmark), so that catkin_make does not
-# compile a peer nobody asked for.
+# compile a peer nobody asked for. VDBFusion's C++ library is added the same
+# way (built in <build>/peers/vdbfusion) on Debian's OpenVDB (libopenvdb-dev,
+# a benchmark-only dependency); its own fallback, which downloads and builds
+# OpenVDB, is never reached.
 
 set(RIM_PEERS_DIR "${RIM_REPOSITORY_DIR}/../shared/peers" CACHE PATH
-    "Unmodified peer source for the side-by-side benchmarks (KISS-ICP, Sophus)")
+    "Unmodified peer source for the side-by-side benchmarks (KISS-ICP, Sophus, VDBFusion)")
 
 function(rim_add_kiss_icp_comparison)
   set(name kiss_icp_comparison_benchmark)
@@ -106,6 +111,58 @@ function(rim_add_kiss_icp_comparison)
   message(STATUS "${name}: KISS-ICP from ${kiss_icp_source}, Sophus installed into ${sophus_prefix}")
 endfunction()
 
+function(rim_add_vdbfusion_comparison)
+  set(name vdbfusion_comparison_benchmark)
+  get_filename_component(peers "${RIM_PEERS_DIR}" ABSOLUTE)
+  # The library folder alone: the top-level project would look for OpenVDB
+  # in its own way and download it where it is not found.
+  set(vdbfusion_source "${peers}/vdbfusion/src/vdbfusion/vdbfusion")
+  if(NOT EXISTS "${vdbfusion_source}/CMakeLists.txt")
+    message(STATUS "${name} switched off: no VDBFusion source in ${peers} (see its SOURCE.md)")
+    return()
+  endif()
+  if(RIM_FUZZ)
+    message(STATUS "${name} switched off: not in a fuzzer build")
+    return()
+  endif()
+
+  # Debian's OpenVDB ships its FindOpenVDB.cmake in a multiarch folder that
+  # is not on CMake's module path. Set in this function's scope only.
+  include(GNUInstallDirs)
+  file(GLOB openvdb_module_dirs "${CMAKE_INSTALL_FULL_LIBDIR}/cmake/OpenVDB" "/usr/lib/*/cmake/OpenVDB"
+    "/usr/local/lib/cmake/OpenVDB")
+  list(PREPEND CMAKE_MODULE_PATH ${openvdb_module_dirs})
+  find_package(OpenVDB QUIET)
+  if(NOT TARGET OpenVDB::openvdb)
+    message(STATUS "${name} switched off: needs OpenVDB (libopenvdb-dev)")
+    return()
+  endif()
+  # Built and run only with Debian bookworm's 10.0 so far; bullseye has 7.1.
+  # Older ones (Ubuntu 20.04's 6.2) are not tried: VDBFusion 0.1.6 uses newer
+  # accessor calls (Grid::getUnsafeAccessor).
+  if(OpenVDB_VERSION VERSION_LESS 7.1)
+    message(STATUS "${name} switched off: needs OpenVDB >= 7.1, found ${OpenVDB_VERSION}")
+    return()
+  endif()
+
+  add_subdirectory("${vdbfusion_source}" "${CMAKE_BINARY_DIR}/peers/vdbfusion" EXCLUDE_FROM_ALL)
+  # Its sources are not ours: no warnings from them in our build logs.
+  target_compile_options(vdbfusion PRIVATE -w)
+
+  add_executable(${name} benchmark/vdbfusion_comparison.cpp test/test_data.cpp)
+  target_link_libraries(${name} PRIVATE range_image_mapping_all VDBFusion::vdbfusion)
+  target_include_directories(${name} PRIVATE test benchmark)
+  target_compile_definitions(${name} PRIVATE RIM_DEFAULT_DATA_DIR="${RIM_DEFAULT_DATA_DIR}"
+    RIM_PEERS_DIR="${peers}" RIM_SOURCE_DIR="${RIM_REPOSITORY_DIR}")
+  target_compile_options(${name} PRIVATE -Wall -Wextra)
+  set_target_properties(${name} PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${RIM_BIN_DIR})
+  if(NOT RIM_CORE_ONLY)
+    set_target_properties(${name} PROPERTIES EXCLUDE_FROM_ALL ON)
+  endif()
+  message(STATUS "${name}: VDBFusion from ${vdbfusion_source}, OpenVDB ${OpenVDB_VERSION}")
+endfunction()
+
 if(RIM_BENCHMARKS)
   rim_add_kiss_icp_comparison()
+  rim_add_vdbfusion_comparison()
 endif()

@@ -28,9 +28,10 @@ packages=(
   libnanoflann-dev libembree-dev robin-map-dev gnuplot-nox clang liboctomap-dev
   libstd-srvs-dev libdiagnostic-updater-dev libmessage-filters-dev libboost-dev
 )
-# Only the benchmark programs need these (PCL: the ICP/GICP baselines).
+# Only the benchmark programs need these (PCL: the ICP/GICP baselines;
+# OpenVDB: VDBFusion from ../shared/peers, vdbfusion_comparison_benchmark).
 benchmarks=${RIM_BENCHMARKS:-1}
-[ "$benchmarks" = 0 ] || packages+=(libbenchmark-dev libpcl-dev)
+[ "$benchmarks" = 0 ] || packages+=(libbenchmark-dev libpcl-dev libopenvdb-dev)
 
 install_dependencies() {
   [ "${RIM_SKIP_INSTALL:-0}" = 1 ] && return

@@ -1,11 +1,13 @@
 // The issue-5 mapping sequences simulated in memory, with exact ground truth:
 // indoor_cart (OS0-128-like, 4 cm voxels, 10 m clip) and outdoor_car
-// (OS1-128-like, 10 cm, 30 m clip), as `rim simulate --preset` builds them
+// (OS1-128-like, 10 cm, 30 m clip), and kitti_like (KITTI's HDL-64E, 10 cm,
+// 30 m clip), as `rim simulate --preset` builds them
 // (same scene, motion, noise and start time), always with the built-in
 // approximation of the beam tables so that results do not depend on the data
-// folder. Shared by the mapping accuracy test and the mapping benchmark.
+// folder. Shared by the mapping accuracy test and the mapping benchmarks.
 #pragma once
 
+#include "range_image_mapping/io/kitti.h"
 #include "range_image_mapping/mapping/marching_cubes.h"
 #include "range_image_mapping/mapping/tsdf_integrator.h"
 #include "range_image_mapping/ouster_metadata.h"
@@ -25,7 +27,7 @@ namespace range_image_mapping::test {
 struct MappingPreset {
   std::string name;
   simulation::SceneKind scene;
-  std::string product;  // ousterLikeMetadataJson's product line
+  std::string product;  // ousterLikeMetadataJson's product line, or "hdl64"
   simulation::MotionProfile motion;
   double sensor_height_m;
   double voxel_m;      // the paper's voxel size for the kind of scene
@@ -44,11 +46,21 @@ inline MappingPreset indoorCartPreset() {
 inline MappingPreset outdoorCarPreset() {
   return {"outdoor_car", simulation::SceneKind::kOutdoor, "OS-1-128", simulation::MotionProfile::kCar, 1.8, 0.10, 30.0};
 }
+// rim simulate's kitti_like sensor and route, mapped as outdoor_car.
+inline MappingPreset kittiLikePreset() {
+  return {"kitti_like", simulation::SceneKind::kOutdoor, "hdl64", simulation::MotionProfile::kCar, 1.8, 0.10, 30.0};
+}
 
 // The built-in approximation of an Ouster sensor ("OS-0-128", "OS-1-128").
 inline LidarModelConstPtr ousterLikeModel(const std::string& product) {
   return std::make_shared<const LidarModel>(
       parseOusterMetadata(simulation::ousterLikeMetadataJson(product, UdpProfile::kRng19Rfl8Sig16Nir16)).intrinsics);
+}
+
+// The preset's sensor: KITTI's HDL-64E as rim simulate's for "hdl64", else the Ouster-like one.
+inline LidarModelConstPtr presetModel(const MappingPreset& preset) {
+  if (preset.product == "hdl64") return std::make_shared<const LidarModel>(io::kittiHdl64Intrinsics());
+  return ousterLikeModel(preset.product);
 }
 
 struct SimulatedMappingSequence {
@@ -82,7 +94,7 @@ inline SimulatedMappingSequence simulateMappingSequence(const MappingPreset& pre
   const RayCaster caster(scene.mesh);
 
   SimulatedMappingSequence sequence;
-  sequence.model = ousterLikeModel(preset.product);
+  sequence.model = presetModel(preset);
   const LidarSimulator simulator(sequence.model, caster, effects, kSeed, kFrequencyHz);
   SeenRegion seen(seen_distance_m > 0.0 ? seen_distance_m : preset.voxel_m);
   const LidarModel& model = *sequence.model;

@@ -121,11 +121,9 @@ class BlockMesher {
 
     const std::size_t voxels = std::size_t(grid.voxelsPerBlock());
     checkBlockArrays(block, voxels, with_intensity_);
-    if (std::none_of(block.weight.begin(), block.weight.end(),
-                     [&](float weight) { return weight > 0.0f && weight >= options.min_weight; }))
-      return false;
-    bool has_negative = false, has_positive = false;
     const float min_weight = options.min_weight;
+    if (!mayCrossZero(grid, block, min_weight)) return false;
+    bool has_negative = false, has_positive = false;
     for (int neighbour = 0; neighbour < 8; ++neighbour) {
       const Eigen::Vector3i offset(neighbour & 1, (neighbour >> 1) & 1, neighbour >> 2);
       const VoxelBlock* source = neighbour == 0 ? &block : grid.find(block.key + offset);
@@ -162,6 +160,46 @@ class BlockMesher {
         }
     }
     return has_negative && has_positive;
+  }
+
+  // Whether the values the block's cubes read (its own voxels and the first
+  // layer of its +1 neighbours) hold both signs among observed voxels; if
+  // not, no cube has a zero crossing. Most blocks of a map hold none (free
+  // space, or wholly behind a surface): this look costs far less than
+  // load's copy. Every cube has its lower corner in the block, so a block
+  // without an observed voxel has none either.
+  bool mayCrossZero(const VoxelBlockGrid& grid, const VoxelBlock& block, float min_weight) const {
+    int signs = 0;  // bit 0: an observed negative value, bit 1: an observed non-negative one
+    const auto look = [&](const float* sdf, const float* weight, int begin, int end, int step) {
+      int negative = 0, positive = 0;
+      for (int i = begin; i < end; i += step) {
+        const int observed = int(weight[i] > 0.0f) & int(weight[i] >= min_weight) & int(std::isfinite(sdf[i]));
+        negative |= observed & int(sdf[i] < 0.0f);
+        positive |= observed & int(sdf[i] >= 0.0f);
+      }
+      signs |= negative | (positive << 1);
+    };
+    const int voxels = edge_ * edge_ * edge_;
+    look(block.sdf.data(), block.weight.data(), 0, voxels, 1);
+    if (signs == 3) return true;
+    if (signs == 0) return false;
+    for (int neighbour = 1; neighbour < 8; ++neighbour) {
+      const Eigen::Vector3i offset(neighbour & 1, (neighbour >> 1) & 1, neighbour >> 2);
+      const VoxelBlock* source = grid.find(block.key + offset);
+      if (!source) continue;
+      checkBlockArrays(*source, std::size_t(voxels), with_intensity_);
+      // The neighbour's voxels at index 0 along each axis where it lies above.
+      const float* sdf = source->sdf.data();
+      const float* weight = source->weight.data();
+      const int y_end = offset.y() ? 1 : edge_, z_end = offset.z() ? 1 : edge_, x_end = offset.x() ? 1 : edge_;
+      for (int z = 0; z < z_end; ++z)
+        for (int y = 0; y < y_end; ++y) {
+          const int row = edge_ * (y + edge_ * z);
+          look(sdf, weight, row, row + x_end, 1);
+        }
+      if (signs == 3) return true;
+    }
+    return false;
   }
 
   // Asymptotic decider: on a face with diagonal negative corners, the

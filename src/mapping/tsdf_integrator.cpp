@@ -161,50 +161,6 @@ struct BlockWriter {
   }
 };
 
-// A first guess of the column that sees a point, from a nearby point's
-// column: rows look in different azimuths (the stagger), so a point seen by
-// another row is seen at another column, by the difference of the rows'
-// azimuth offsets. The row is guessed from the elevation alone (a table over
-// its sine); a wrong guess only costs a refinement pass.
-struct StaggerGuess {
-  std::vector<float> column_shift;  // per row, relative to row 0
-  std::vector<int16_t> row_of_bin;  // nearest row by elevation
-  float sine_low = 0.0f, bins_per_unit = 0.0f, beam_origin_z = 0.0f;
-
-  void build(const LidarModel& model) {
-    const int rows = model.rows(), columns = model.columns();
-    const auto azimuth = [&](int v) {
-      const Eigen::Vector3f& direction = model.direction(0, v);
-      return std::atan2(double(direction.y()), double(direction.x()));
-    };
-    column_shift.resize(rows);
-    for (int v = 0; v < rows; ++v)
-      column_shift[v] = float(std::remainder(azimuth(v) - azimuth(0), 2.0 * M_PI) * columns / (2.0 * M_PI));
-    std::vector<float> sine(rows);
-    for (int v = 0; v < rows; ++v) sine[v] = model.direction(0, v).z();
-    const auto [low, high] = std::minmax_element(sine.begin(), sine.end());
-    const int bins = 8 * rows;
-    sine_low = *low - 0.01f;
-    bins_per_unit = float(bins) / (*high + 0.01f - sine_low);
-    row_of_bin.resize(bins);
-    for (int bin = 0; bin < bins; ++bin) {
-      const float centre = sine_low + (float(bin) + 0.5f) / bins_per_unit;
-      int nearest = 0;
-      for (int v = 1; v < rows; ++v)
-        if (std::abs(sine[v] - centre) < std::abs(sine[nearest] - centre)) nearest = v;
-      row_of_bin[bin] = int16_t(nearest);
-    }
-    beam_origin_z = float(model.intrinsics().beam_origin_z_m);
-  }
-  int row(const Eigen::Vector3f& point) const {
-    const Eigen::Vector3f from_origin(point.x(), point.y(), point.z() - beam_origin_z);
-    const float sine = from_origin.z() / from_origin.norm();
-    const int bin = int((sine - sine_low) * bins_per_unit);
-    return row_of_bin[std::clamp(bin, 0, int(row_of_bin.size()) - 1)];
-  }
-  float shift(const Eigen::Vector3f& point) const { return column_shift[row(point)]; }
-};
-
 // Voxel positions and their projections for one block, reused per thread.
 struct BlockBuffers {
   // points: lidar frame at the scan time; frame_points: each voxel in the
@@ -292,8 +248,6 @@ struct TsdfIntegrator::Workspace {
   VertexNormalMap normals;   // point-to-plane distances and incidence weighting
   std::vector<PixelPlane> pixel_planes;    // point-to-plane
   std::vector<uint8_t> near_seam;          // per column: no plane (moving sweeps)
-  StaggerGuess stagger;                    // for the model below
-  const LidarModel* stagger_model = nullptr;
   std::vector<float> pixel_angle;          // per row: the larger of its row and column spacing, radians
 };
 
@@ -356,54 +310,43 @@ int columnSeenFromMovingSensor(const LidarModel& model, const SweepMotion& motio
 
 // Pi of a block's voxels into the moving sensor: each voxel as the sensor
 // saw it when the column that measured it fired (the fixed point above, for
-// every voxel). All voxels start with the block centre's column moved by
-// their azimuth within the block and the stagger of their rows (the motion
-// needs only a close column); those whose pixel was measured too far in time from
-// the motion used are moved again with their own column's. Voxels that do
-// not settle lie where the sweep's start and end overlap or leave a gap (the
+// every voxel). All voxels are first projected as the block centre's column
+// saw them (the block's lattice moved once, no motion per voxel): that gives
+// each voxel's own column, stagger included, up to the little motion between
+// the two columns. Voxels whose column was measured too far in time from the
+// motion used are moved again with their own column's. Voxels that do not
+// settle lie where the sweep's start and end overlap or leave a gap (the
 // seam): they miss this scan rather than being averaged with the wrong
 // sensor position.
-void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion, const StaggerGuess& stagger,
-                             const Eigen::Vector3f& first, const Eigen::Matrix3f& lattice_steps, int edge,
-                             BlockBuffers& buffers) {
+void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion, const Eigen::Vector3f& first,
+                             const Eigen::Matrix3f& lattice_steps, int edge, BlockBuffers& buffers) {
   const std::size_t voxels = std::size_t(edge) * edge * edge;
   const Eigen::Vector3f block_centre = first + lattice_steps * Eigen::Vector3f::Constant(0.5f * float(edge - 1));
   const int centre_column = columnSeenFromMovingSensor(model, motion, block_centre);
+  std::size_t pending = 0;
   if (centre_column >= 0) {
-    // In the frame of the centre's column, where the rows that see the
-    // voxels are those of the pass below (a moving sensor changes them).
-    const int columns = model.columns();
-    const Eigen::Vector3f centre = motion.toColumnFrame(centre_column, block_centre);
-    const float centre_shift = stagger.shift(centre);
-    // The azimuth of a voxel relative to the centre's, to first order: the
-    // column grows as the azimuth falls.
-    const float planar_squared = centre.head<2>().squaredNorm();
-    Eigen::Vector2f column_gradient = Eigen::Vector2f::Zero();
-    if (planar_squared > 0.0f)
-      column_gradient = Eigen::Vector2f(centre.y(), -centre.x()) * (float(columns) / (2.0f * float(M_PI)) / planar_squared);
-    // The block's lattice in that frame, built as the voxels' (buffers.points).
+    // The block's lattice in the centre column's frame, built as the voxels' (buffers.points).
     const Eigen::Vector3f moved_first = motion.toColumnFrame(centre_column, first);
     const Eigen::Matrix3f moved_steps = motion.inverse[centre_column].leftCols<3>() * lattice_steps;
     std::size_t i = 0;
     for (int k = 0; k < edge; ++k)
       for (int j = 0; j < edge; ++j) {
         const Eigen::Vector3f row_start = moved_first + moved_steps.col(1) * float(j) + moved_steps.col(2) * float(k);
-        for (int x = 0; x < edge; ++x, ++i) {
-          const Eigen::Vector3f point = row_start + moved_steps.col(0) * float(x);
-          const float shift = stagger.shift(point) - centre_shift + column_gradient.dot((point - centre).head<2>());
-          int column = centre_column + int(shift + (shift >= 0.0f ? 0.5f : -0.5f));  // rounded (lround is a libm call)
-          if (column < 0) column += columns;
-          if (column >= columns) column -= columns;
-          buffers.pixels[i].column = column;
-          buffers.hits[i] = 1;
-        }
+        for (int x = 0; x < edge; ++x) buffers.moved_points[i++] = row_start + moved_steps.col(0) * float(x);
       }
+    model.projectMany(buffers.moved_points.data(), voxels, buffers.pixels.data(), buffers.hits.data());
+    for (i = 0; i < voxels; ++i) {
+      // A miss here is a voxel off the vertical field of view by more than
+      // the sensor moved between the two columns: it is left out.
+      if (!buffers.hits[i]) continue;
+      buffers.frame_points[i] = buffers.moved_points[i];
+      if (!motion.settled(centre_column, buffers.pixels[i].column)) buffers.pending[pending++] = uint32_t(i);
+    }
   } else {  // the centre is outside the field of view: start from the scan-time projection
     model.projectMany(buffers.points.data(), voxels, buffers.pixels.data(), buffers.hits.data());
+    for (std::size_t i = 0; i < voxels; ++i)
+      if (buffers.hits[i]) buffers.pending[pending++] = uint32_t(i);
   }
-  std::size_t pending = 0;
-  for (std::size_t i = 0; i < voxels; ++i)
-    if (buffers.hits[i]) buffers.pending[pending++] = uint32_t(i);
   for (int pass = 0; pass < kMotionRefinements && pending > 0; ++pass) {
     for (std::size_t n = 0; n < pending; ++n) {
       const uint32_t i = buffers.pending[n];
@@ -594,12 +537,6 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
     }
     // Columns outside the sensor's column window have no time.
     column_period_s = (latest - earliest) / float(std::max(timed_columns - 1, 1));
-    // (Rebuilt for another model; a model at a freed one's address with other
-    // tables only costs refinement passes: the guess is checked.)
-    if (work.stagger_model != &model || work.stagger.column_shift.size() != std::size_t(model.rows())) {
-      work.stagger.build(model);
-      work.stagger_model = &model;
-    }
     time_tolerance_s = motionTimeTolerance(pose.twist, grid.voxelSize(), columns, column_period_s);
   }
 
@@ -771,7 +708,7 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
           for (int i = 0; i < edge; ++i) buffers.points[n++] = row_start + lattice_steps.col(0) * float(i);
         }
       if (moving) {
-        projectIntoMovingSensor(model, sweep_motion, work.stagger, first, lattice_steps, edge, buffers);
+        projectIntoMovingSensor(model, sweep_motion, first, lattice_steps, edge, buffers);
       } else {
         model.projectMany(buffers.points.data(), voxels, buffers.pixels.data(), buffers.hits.data());
       }
