@@ -373,6 +373,60 @@ TEST(Recording, PcdBinaryCompressedIsUnpacked) {
   fs::remove_all(folder);
 }
 
+// A real Ouster capture unprojected into PCD scans with a ring field (as a
+// driver's cloud): the model estimated from the rings keeps nearly every
+// point, and forEachScan projects through the ring map.
+TEST(Recording, PcdFolderWithRingsGetsAModelFromItsRings) {
+  RIM_REQUIRE_DATA(pcap, "ouster-pcaps/OS-1-128_v2.3.0_1024x10_lb_n3.pcap");
+  RIM_REQUIRE_DATA(json, "ouster-pcaps/OS-1-128_v2.3.0_1024x10.json");
+  io::RecordingOptions pcap_options;
+  pcap_options.input = pcap;
+  pcap_options.metadata = json;
+  const std::vector<RangeImage> scans = scansOf(pcap_options);
+  ASSERT_EQ(scans.size(), 3u);
+  const fs::path folder = freshFolder("rings");
+  std::ofstream times(folder / "times.txt");
+  std::size_t measured = 0;
+  for (std::size_t k = 0; k < scans.size(); ++k) {
+    PointCloudInput cloud;
+    for (int v = 0; v < scans[k].rows(); ++v)
+      for (int u = 0; u < scans[k].columns(); ++u)
+        if (scans[k].valid(v, u)) {
+          cloud.points.push_back(scans[k].model->unproject(u, v, scans[k].at(v, u)));
+          cloud.ring.push_back(uint16_t(v));
+        }
+    cloud.organized_width = int(cloud.size());
+    measured += cloud.size();
+    io::writePcd((folder / ("scan" + std::to_string(k) + ".pcd")).string(), cloud, io::PcdEncoding::kBinary);
+    times << std::setprecision(17) << double(scans[k].stamp_ns) * 1e-9 << "\n";
+  }
+  times.close();
+  io::RecordingOptions options;
+  options.input = folder.string();
+  const io::Recording recording = io::openRecording(options);
+  EXPECT_EQ(recording.kind, io::RecordingKind::kCloudFiles);
+  EXPECT_EQ(recording.model->rows(), 128);
+  EXPECT_EQ(recording.model_info.ring_to_row.size(), 128u);
+  ASSERT_TRUE(recording.model_info.fit);
+  EXPECT_GT(recording.model_info.fit->keptShare(), 0.99) << recording.model_info.summary;
+  EXPECT_TRUE(recording.model_info.warning.empty()) << recording.model_info.warning;
+  io::RecordingStatistics statistics;
+  std::vector<RangeImage> images;
+  io::forEachScan(
+      recording,
+      [&](const RangeImage& image) {
+        images.push_back(image);
+        return true;
+      },
+      &statistics);
+  ASSERT_EQ(images.size(), 3u);
+  EXPECT_EQ(statistics.scans, 3u);
+  EXPECT_EQ(statistics.projection.measured(), measured);
+  EXPECT_GT(statistics.projection.keptFraction(), 0.99);
+  for (std::size_t k = 0; k < 3; ++k) EXPECT_NEAR(double(images[k].stamp_ns), double(scans[k].stamp_ns), 1000.0);
+  fs::remove_all(folder);
+}
+
 TEST(Recording, MalformedFilesNameTheProblem) {
   const fs::path folder = freshFolder("malformed");
   const auto pcdError = [&](const std::string& text) {

@@ -240,15 +240,6 @@ uint64_t fileStamp(const Recording& recording, std::size_t frame) {
   return uint64_t(seconds) * 1000000000ull + uint64_t(std::llround((time_s - seconds) * 1e9));
 }
 
-void addStatistics(const ProjectionStatistics& scan, ProjectionStatistics& total) {
-  total.input_points += scan.input_points;
-  total.non_finite += scan.non_finite;
-  total.no_return += scan.no_return;
-  total.outside_model += scan.outside_model;
-  total.occluded += scan.occluded;
-  total.kept += scan.kept;
-  total.max_ray_distance_m = std::max(total.max_ray_distance_m, scan.max_ray_distance_m);
-}
 
 }  // namespace
 
@@ -382,7 +373,7 @@ std::size_t forEachScan(const Recording& recording, const std::function<bool(con
                            : projectPointCloud(cloud, recording.model, &projection);
     image.frame_id = uint32_t(frame);
     if (statistics) {
-      addStatistics(projection, statistics->projection);
+      statistics->projection.add(projection);
       ++statistics->scans;
     }
     // rim simulate's column times make the simulated scans deskewable; real

@@ -154,6 +154,16 @@ void projectThroughModel(const PointCloudInput& cloud, const LidarModel& model, 
 
 }  // namespace
 
+void ProjectionStatistics::add(const ProjectionStatistics& scan) {
+  input_points += scan.input_points;
+  non_finite += scan.non_finite;
+  no_return += scan.no_return;
+  outside_model += scan.outside_model;
+  occluded += scan.occluded;
+  kept += scan.kept;
+  max_ray_distance_m = std::max(max_ray_distance_m, scan.max_ray_distance_m);
+}
+
 void PointCloudInput::validate() const {
   checkOptionalArray(intensity.size(), points.size(), "intensity");
   checkOptionalArray(ring.size(), points.size(), "ring");
