@@ -154,6 +154,11 @@ TEST(Recording, OusterPacketBagGivesTheGoldenImageAndThePcapPathsImage) {
   // The metadata file instead of the bag's topic: the same image again.
   options.metadata = json;
   expectSameImages(scansOf(options), from_bag);
+  // The IMU packets chosen by mistake: named, with both sizes.
+  options.topic = "/os_node0/imu_packets";
+  const std::string error = errorOf([&] { scansOf(options); });
+  EXPECT_TRUE(contains(error, "/os_node0/imu_packets") && contains(error, "48 bytes") && contains(error, "8448"))
+      << error;
   fs::remove_all(folder);
 }
 
