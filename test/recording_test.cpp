@@ -91,6 +91,13 @@ std::vector<RangeImage> scansOf(const io::Recording& recording) {
 
 std::vector<RangeImage> scansOf(const io::RecordingOptions& options) { return scansOf(io::openRecording(options)); }
 
+std::vector<RangeImage> captureScans(const std::string& pcap, const std::string& json) {
+  io::RecordingOptions options;
+  options.input = pcap;
+  options.metadata = json;
+  return scansOf(options);
+}
+
 void expectSameImages(const std::vector<RangeImage>& expected, const std::vector<RangeImage>& actual) {
   ASSERT_EQ(expected.size(), actual.size());
   for (std::size_t k = 0; k < expected.size(); ++k) {
@@ -147,10 +154,7 @@ TEST(Recording, OusterPacketBagGivesTheGoldenImageAndThePcapPathsImage) {
     });
     pcap.close();
   }
-  io::RecordingOptions pcap_options;
-  pcap_options.input = (folder / "capture.pcap").string();
-  pcap_options.metadata = json;
-  expectSameImages(scansOf(pcap_options), from_bag);
+  expectSameImages(captureScans((folder / "capture.pcap").string(), json), from_bag);
   // The metadata file instead of the bag's topic: the same image again.
   options.metadata = json;
   expectSameImages(scansOf(options), from_bag);
@@ -167,10 +171,7 @@ TEST(Recording, OusterPacketBagGivesTheGoldenImageAndThePcapPathsImage) {
 TEST(Recording, BothPacketMessageGenerationsGiveTheCapturesScans) {
   RIM_REQUIRE_DATA(pcap, "ouster-pcaps/OS-1-128_v2.3.0_1024x10_lb_n3.pcap");
   RIM_REQUIRE_DATA(json, "ouster-pcaps/OS-1-128_v2.3.0_1024x10.json");
-  io::RecordingOptions pcap_options;
-  pcap_options.input = pcap;
-  pcap_options.metadata = json;
-  const std::vector<RangeImage> from_pcap = scansOf(pcap_options);
+  const std::vector<RangeImage> from_pcap = captureScans(pcap, json);
   ASSERT_EQ(from_pcap.size(), 3u);
   const OusterMetadata metadata = loadOusterMetadata(json);
   std::ifstream metadata_file(json);
@@ -384,10 +385,7 @@ TEST(Recording, PcdBinaryCompressedIsUnpacked) {
 TEST(Recording, PcdFolderWithRingsGetsAModelFromItsRings) {
   RIM_REQUIRE_DATA(pcap, "ouster-pcaps/OS-1-128_v2.3.0_1024x10_lb_n3.pcap");
   RIM_REQUIRE_DATA(json, "ouster-pcaps/OS-1-128_v2.3.0_1024x10.json");
-  io::RecordingOptions pcap_options;
-  pcap_options.input = pcap;
-  pcap_options.metadata = json;
-  const std::vector<RangeImage> scans = scansOf(pcap_options);
+  const std::vector<RangeImage> scans = captureScans(pcap, json);
   ASSERT_EQ(scans.size(), 3u);
   const fs::path folder = freshFolder("rings");
   std::ofstream times(folder / "times.txt");
