@@ -91,6 +91,13 @@ std::vector<RangeImage> scansOf(const io::Recording& recording) {
 
 std::vector<RangeImage> scansOf(const io::RecordingOptions& options) { return scansOf(io::openRecording(options)); }
 
+std::vector<RangeImage> captureScans(const std::string& pcap, const std::string& json) {
+  io::RecordingOptions options;
+  options.input = pcap;
+  options.metadata = json;
+  return scansOf(options);
+}
+
 void expectSameImages(const std::vector<RangeImage>& expected, const std::vector<RangeImage>& actual) {
   ASSERT_EQ(expected.size(), actual.size());
   for (std::size_t k = 0; k < expected.size(); ++k) {
@@ -147,13 +154,15 @@ TEST(Recording, OusterPacketBagGivesTheGoldenImageAndThePcapPathsImage) {
     });
     pcap.close();
   }
-  io::RecordingOptions pcap_options;
-  pcap_options.input = (folder / "capture.pcap").string();
-  pcap_options.metadata = json;
-  expectSameImages(scansOf(pcap_options), from_bag);
+  expectSameImages(captureScans((folder / "capture.pcap").string(), json), from_bag);
   // The metadata file instead of the bag's topic: the same image again.
   options.metadata = json;
   expectSameImages(scansOf(options), from_bag);
+  // The IMU packets chosen by mistake: named, with both sizes.
+  options.topic = "/os_node0/imu_packets";
+  const std::string error = errorOf([&] { scansOf(options); });
+  EXPECT_TRUE(contains(error, "/os_node0/imu_packets") && contains(error, "48 bytes") && contains(error, "8448"))
+      << error;
   fs::remove_all(folder);
 }
 
@@ -162,10 +171,7 @@ TEST(Recording, OusterPacketBagGivesTheGoldenImageAndThePcapPathsImage) {
 TEST(Recording, BothPacketMessageGenerationsGiveTheCapturesScans) {
   RIM_REQUIRE_DATA(pcap, "ouster-pcaps/OS-1-128_v2.3.0_1024x10_lb_n3.pcap");
   RIM_REQUIRE_DATA(json, "ouster-pcaps/OS-1-128_v2.3.0_1024x10.json");
-  io::RecordingOptions pcap_options;
-  pcap_options.input = pcap;
-  pcap_options.metadata = json;
-  const std::vector<RangeImage> from_pcap = scansOf(pcap_options);
+  const std::vector<RangeImage> from_pcap = captureScans(pcap, json);
   ASSERT_EQ(from_pcap.size(), 3u);
   const OusterMetadata metadata = loadOusterMetadata(json);
   std::ifstream metadata_file(json);
@@ -370,6 +376,57 @@ TEST(Recording, PcdBinaryCompressedIsUnpacked) {
   const PointCloudInput cloud = io::readPcd((folder / "c.pcd").string());
   ASSERT_EQ(cloud.size(), 4u);
   for (std::size_t i = 0; i < 4; ++i) EXPECT_EQ(cloud.points[i], Eigen::Vector3f(x[i], y[i], z[i])) << i;
+  fs::remove_all(folder);
+}
+
+// A real Ouster capture unprojected into PCD scans with a ring field (as a
+// driver's cloud): the model estimated from the rings keeps nearly every
+// point, and forEachScan projects through the ring map.
+TEST(Recording, PcdFolderWithRingsGetsAModelFromItsRings) {
+  RIM_REQUIRE_DATA(pcap, "ouster-pcaps/OS-1-128_v2.3.0_1024x10_lb_n3.pcap");
+  RIM_REQUIRE_DATA(json, "ouster-pcaps/OS-1-128_v2.3.0_1024x10.json");
+  const std::vector<RangeImage> scans = captureScans(pcap, json);
+  ASSERT_EQ(scans.size(), 3u);
+  const fs::path folder = freshFolder("rings");
+  std::ofstream times(folder / "times.txt");
+  std::size_t measured = 0;
+  for (std::size_t k = 0; k < scans.size(); ++k) {
+    PointCloudInput cloud;
+    for (int v = 0; v < scans[k].rows(); ++v)
+      for (int u = 0; u < scans[k].columns(); ++u)
+        if (scans[k].valid(v, u)) {
+          cloud.points.push_back(scans[k].model->unproject(u, v, scans[k].at(v, u)));
+          cloud.ring.push_back(uint16_t(v));
+        }
+    cloud.organized_width = int(cloud.size());
+    measured += cloud.size();
+    io::writePcd((folder / ("scan" + std::to_string(k) + ".pcd")).string(), cloud, io::PcdEncoding::kBinary);
+    times << std::setprecision(17) << double(scans[k].stamp_ns) * 1e-9 << "\n";
+  }
+  times.close();
+  io::RecordingOptions options;
+  options.input = folder.string();
+  const io::Recording recording = io::openRecording(options);
+  EXPECT_EQ(recording.kind, io::RecordingKind::kCloudFiles);
+  EXPECT_EQ(recording.model->rows(), 128);
+  EXPECT_EQ(recording.model_info.ring_to_row.size(), 128u);
+  ASSERT_TRUE(recording.model_info.fit);
+  EXPECT_GT(recording.model_info.fit->keptShare(), 0.99) << recording.model_info.summary;
+  EXPECT_TRUE(recording.model_info.warning.empty()) << recording.model_info.warning;
+  io::RecordingStatistics statistics;
+  std::vector<RangeImage> images;
+  io::forEachScan(
+      recording,
+      [&](const RangeImage& image) {
+        images.push_back(image);
+        return true;
+      },
+      &statistics);
+  ASSERT_EQ(images.size(), 3u);
+  EXPECT_EQ(statistics.scans, 3u);
+  EXPECT_EQ(statistics.projection.measured(), measured);
+  EXPECT_GT(statistics.projection.keptFraction(), 0.99);
+  for (std::size_t k = 0; k < 3; ++k) EXPECT_NEAR(double(images[k].stamp_ns), double(scans[k].stamp_ns), 1000.0);
   fs::remove_all(folder);
 }
 

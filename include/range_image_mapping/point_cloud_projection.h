@@ -62,8 +62,8 @@ struct ProjectionStatistics {
   // Share of the measured points that made it into the image: low values
   // point at wrong intrinsics (field of view, ring map, frame).
   double keptFraction() const { return measured() ? double(kept) / double(measured()) : 0.0; }
-  // Adds another projection's counts (the largest ray distance of both).
-  ProjectionStatistics& operator+=(const ProjectionStatistics& other);
+  // Sums another scan's counts into these (the largest ray distance of both).
+  void add(const ProjectionStatistics& scan);
 };
 
 // Projects into a staggered image of model's size, in one pass over the points

@@ -352,11 +352,20 @@ std::size_t forEachScan(const Recording& recording, const std::function<bool(con
         readOusterScans(recording.pcap, *recording.ouster, emit);
       } else {
         ScanBatcher batcher(*recording.ouster, emit);
+        std::size_t packet_size = 0;
         BagReader(recording.bag).forEachOusterPacket(recording.topic, [&](const BagPacket& packet) {
+          packet_size = packet.size;
           batcher.addPacket(packet.data, packet.size);
           return true;
         });
         batcher.flush();
+        const BatcherStatistics& packets = batcher.statistics();
+        if (given == 0 && packets.wrong_size > 0)
+          throw RecordingError("INPUT " + recording.input + ": the " + std::to_string(packets.wrong_size) +
+                               " packets on " + recording.topic + " (" + std::to_string(packet_size) +
+                               " bytes) are not the metadata's lidar packets (" +
+                               std::to_string(batcher.format().packetSize()) +
+                               " bytes): an IMU topic, or metadata of another sensor or mode?");
       }
     } catch (const Stop&) {
     }
@@ -372,7 +381,7 @@ std::size_t forEachScan(const Recording& recording, const std::function<bool(con
                            : projectPointCloud(cloud, recording.model, &projection);
     image.frame_id = uint32_t(frame);
     if (statistics) {
-      statistics->projection += projection;
+      statistics->projection.add(projection);
       ++statistics->scans;
     }
     // rim simulate's column times make the simulated scans deskewable; real

@@ -551,7 +551,7 @@ void AdapterNodelet::projectAndPublish(PointCloudInput& cloud, const std_msgs::H
   ProjectionStatistics statistics;
   const RangeImage image = ring_to_row_.empty() ? projectPointCloud(cloud, cloud_model_, &statistics)
                                                 : projectPointCloud(cloud, cloud_model_, ring_to_row_, &statistics);
-  projection_statistics_ += statistics;
+  projection_statistics_.add(statistics);
   checkModelFit(statistics);
   publish(image, header);
 }
@@ -596,7 +596,7 @@ bool AdapterNodelet::estimateCloudModel(const PointCloudInput& cloud, const std_
 // The first clouds of a model given by the settings: does it explain them?
 void AdapterNodelet::checkModelFit(const ProjectionStatistics& statistics) {
   if (fit_check_clouds_ >= std::size_t(parameters_.estimate_clouds)) return;
-  fit_check_statistics_ += statistics;
+  fit_check_statistics_.add(statistics);
   if (++fit_check_clouds_ < std::size_t(parameters_.estimate_clouds)) return;
   const std::string parameter = parameters_.cloud_intrinsics == CloudIntrinsicsSource::kSensor   ? "sensor"
                                 : parameters_.cloud_intrinsics == CloudIntrinsicsSource::kOuster ? "metadata_file"

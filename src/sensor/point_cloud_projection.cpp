@@ -154,6 +154,16 @@ void projectThroughModel(const PointCloudInput& cloud, const LidarModel& model, 
 
 }  // namespace
 
+void ProjectionStatistics::add(const ProjectionStatistics& scan) {
+  input_points += scan.input_points;
+  non_finite += scan.non_finite;
+  no_return += scan.no_return;
+  outside_model += scan.outside_model;
+  occluded += scan.occluded;
+  kept += scan.kept;
+  max_ray_distance_m = std::max(max_ray_distance_m, scan.max_ray_distance_m);
+}
+
 void PointCloudInput::validate() const {
   checkOptionalArray(intensity.size(), points.size(), "intensity");
   checkOptionalArray(ring.size(), points.size(), "ring");
@@ -270,17 +280,6 @@ RingIntrinsics intrinsicsFromRings(const PointCloudInput& cloud, int columns) {
   }
   intrinsics.validate();
   return result;
-}
-
-ProjectionStatistics& ProjectionStatistics::operator+=(const ProjectionStatistics& other) {
-  input_points += other.input_points;
-  non_finite += other.non_finite;
-  no_return += other.no_return;
-  outside_model += other.outside_model;
-  occluded += other.occluded;
-  kept += other.kept;
-  max_ray_distance_m = std::max(max_ray_distance_m, other.max_ray_distance_m);
-  return *this;
 }
 
 }  // namespace range_image_mapping
