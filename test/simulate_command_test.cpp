@@ -191,6 +191,7 @@ TEST_F(SimulateCommand, BadRequestsFailWithANamedError) {
       {"simulate --preset indoor_cart --formats tape --frames 1", "unknown format 'tape'"},
       {"simulate --sensor OS-9 --scene indoor --motion cart --frames 1", "--sensor OS-9"},
       {"simulate --preset outdoor_vlp16 --formats kitti --frames 1", "read as KITTI's HDL-64E, not VLP-16"},
+      {"simulate --preset outdoor_vlp16 --cloud-layout ouster-ros --frames 1", "VLP-16 is no Ouster sensor"},
       {"simulate --sensor OS-0-128 --scene /nonexistent.ply --motion cart --frames 1", "nonexistent.ply"},
   };
   for (const auto& c : cases) {

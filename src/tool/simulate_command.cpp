@@ -468,6 +468,9 @@ int runSimulate(SimulateOptions options) {
             << sensor.model->rows() << " x " << sensor.model->columns() << ") in " << seconds << " s; "
             << scene.mesh.triangles.size() << " scene triangles, " << surface.size()
             << " ground-truth surface samples; written to " << out.string() << "\n";
+  if (formats.count("pcd"))
+    std::cout << "plain clouds (no sensor model) in " << (out / "clouds").string() << ": give that folder to rim ("
+              << out.string() << " itself also holds scene.ply and surface.ply)\n";
   if (!actors.empty() && returns > 0)
     std::cout << actors.size() << " moving actors: " << 100.0 * actor_returns / returns << " % of the true returns ("
               << 100.0 * truck_returns / returns << " % on the trucks alongside)\n";
