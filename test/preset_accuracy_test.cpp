@@ -5,6 +5,7 @@
 //   indoor_cart: ATE <= 5 cm; mesh F >= 0.95 at 3 x 4 cm
 //   outdoor_car: mesh F >= 0.93 at 3 x 10 cm
 //   handheld_fast (150 deg/s): no frame diverges
+#include "json_file.h"
 #include "rim_command.h"
 
 #include <gtest/gtest.h>
@@ -25,10 +26,7 @@ Json::Value PresetAccuracy::runPreset(const std::string& preset, const std::stri
   const test::RunResult run = rim("run " + preset + " --no-plot --out " + out);
   EXPECT_EQ(run.exit_code, 0) << run.err;
   std::cout << preset << ":\n" << run.out;
-  Json::Value report;
-  std::istringstream text(test::readText(out + "/report.json"));
-  std::string errors;
-  EXPECT_TRUE(Json::parseFromStream(Json::CharReaderBuilder(), text, &report, &errors)) << errors;
+  const Json::Value report = test::readJsonFile(out + "/report.json");
   EXPECT_EQ(report["odometry"]["resets"].asInt(), 0);
   EXPECT_EQ(report["mapping"]["scans_refused"].asInt(), 0);
   return report;

@@ -3,11 +3,13 @@
 // deterministic per seed, and bad requests fail with a named error.
 #include "range_image_mapping/evaluation/surface_metrics.h"
 #include "range_image_mapping/io/kitti.h"
+#include "range_image_mapping/io/pcd.h"
 #include "range_image_mapping/io/pcap_reader.h"
 #include "range_image_mapping/io/pcap_writer.h"
 #include "range_image_mapping/io/ply.h"
 #include "range_image_mapping/io/pose_file.h"
 #include "range_image_mapping/ouster_packet_encoder.h"
+#include "range_image_mapping/sensor_catalog.h"
 #include "range_image_mapping/simulation/lidar_simulator.h"
 #include "range_image_mapping/simulation/scene_generator.h"
 #include "range_image_mapping/simulation/sensor_presets.h"
@@ -16,6 +18,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 
 namespace range_image_mapping::simulation {
@@ -133,6 +136,51 @@ TEST_F(SimulateCommand, KittiLikeWritesVelodyneScans) {
   EXPECT_FALSE(std::filesystem::exists(path("kitti/capture.pcap")));
 }
 
+// A named sensor's scans are plain PCD clouds (no ring) in clouds/: every
+// point lies on one of the catalog's beams at its azimuth offset, its time
+// is its column's firing time, and times.txt holds the ground truth's times.
+TEST_F(SimulateCommand, NamedSensorsWritePlainCloudsOnTheirBeams) {
+  for (const char* name : {"VLP-32C", "Pandar64"}) {
+    SCOPED_TRACE(name);
+    const std::string out = path(name);
+    const test::RunResult run = rim(std::string("simulate --preset outdoor_car --sensor ") + name +
+                                    " --frames 2 --noise 0 --out '" + out + "'");
+    ASSERT_EQ(run.exit_code, 0) << run.err;
+    EXPECT_FALSE(std::filesystem::exists(out + "/capture.pcap"));
+    const LidarIntrinsics intrinsics = *catalogSensor(name);
+    const double column_rad = 2.0 * M_PI / intrinsics.columns;
+    const std::vector<double> times_s = io::readTimes(out + "/clouds/times.txt");
+    const std::vector<io::StampedPose> poses = io::readPoseFile(out + "/poses_tum.txt");
+    ASSERT_EQ(times_s.size(), 2u);
+    ASSERT_EQ(poses.size(), 2u);
+    for (std::size_t frame = 0; frame < 2; ++frame) EXPECT_NEAR(times_s[frame], poses[frame].time_s, 1e-6);
+    const PointCloudInput cloud = io::readPcd(out + "/clouds/000001.pcd");
+    EXPECT_TRUE(cloud.ring.empty());
+    ASSERT_EQ(cloud.time_offset_s.size(), cloud.size());
+    ASSERT_GT(cloud.size(), 10000u);
+    std::size_t off_beam = 0;
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      const Eigen::Vector3f& p = cloud.points[i];
+      const double elevation = std::atan2(p.z(), std::hypot(p.x(), p.y()));
+      int row = 0;
+      for (int v = 1; v < intrinsics.rows; ++v)
+        if (std::abs(intrinsics.altitude_rad[v] - elevation) < std::abs(intrinsics.altitude_rad[row] - elevation))
+          row = v;
+      // Azimuth = encoder angle of the point's column + the beam's offset; the
+      // column fires at u / (W * 10 Hz), encoder angle -2 pi u / W (Ouster's sense).
+      const double encoder = std::atan2(p.y(), p.x()) - intrinsics.azimuth_offset_rad[row];
+      const double column = -encoder / column_rad;
+      const double wrapped = column - intrinsics.columns * std::floor(column / intrinsics.columns);
+      const long u = std::lround(wrapped) % intrinsics.columns;
+      const bool on_beam = std::abs(intrinsics.altitude_rad[row] - elevation) < 1e-4 &&
+                           std::abs(wrapped - std::round(wrapped)) < 0.01 &&
+                           std::abs(cloud.time_offset_s[i] - u / (intrinsics.columns * 10.0)) < 1e-6;
+      off_beam += !on_beam;
+    }
+    EXPECT_EQ(off_beam, 0u) << "of " << cloud.size();
+  }
+}
+
 TEST_F(SimulateCommand, BadRequestsFailWithANamedError) {
   const struct {
     const char* arguments;
@@ -142,6 +190,8 @@ TEST_F(SimulateCommand, BadRequestsFailWithANamedError) {
       {"simulate --preset kitti_like --formats pcap --frames 1", "needs an Ouster sensor"},
       {"simulate --preset indoor_cart --formats tape --frames 1", "unknown format 'tape'"},
       {"simulate --sensor OS-9 --scene indoor --motion cart --frames 1", "--sensor OS-9"},
+      {"simulate --preset outdoor_vlp16 --formats kitti --frames 1", "read as KITTI's HDL-64E, not VLP-16"},
+      {"simulate --preset outdoor_vlp16 --cloud-layout ouster-ros --frames 1", "VLP-16 is no Ouster sensor"},
       {"simulate --sensor OS-0-128 --scene /nonexistent.ply --motion cart --frames 1", "nonexistent.ply"},
   };
   for (const auto& c : cases) {

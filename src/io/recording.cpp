@@ -296,6 +296,11 @@ Recording openRecording(const RecordingOptions& options) {
       if (recording.expected_frames == 0) recording.expected_frames = int(recording.column_times.size());
     }
     recording.ground_truth = findGroundTruth(sequence);
+    // rim simulate writes a sensor's plain clouds to clouds/, beside its ground truth.
+    const fs::path folder = sequence.filename().empty() ? sequence.parent_path() : sequence;  // "clouds/"
+    if (recording.kind == RecordingKind::kCloudFiles && recording.ground_truth.poses.empty() &&
+        folder.filename() == "clouds")
+      recording.ground_truth = findGroundTruth(folder.parent_path());
   }
   if (recording.frames > 0)
     recording.expected_frames =

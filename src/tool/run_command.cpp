@@ -157,9 +157,8 @@ io::RecordingOptions simulateIfPreset(RunCommandOptions& options, bool preset, c
   if (preset) {
     const fs::path sequence = out / "sequence";
     std::cerr << "simulating " << options.recording.input << " into " << sequence.string() << "\n";
-    simulatePreset(options.recording.input, sequence.string(), options.recording.frames,
-                   options.map.integrator.max_range_m, options.simulate_bag ? "bag" : "");
-    options.recording.input = sequence.string();
+    options.recording.input = simulatePreset(options.recording.input, sequence.string(), options.recording.frames,
+                                             options.map.integrator.max_range_m, options.simulate_bag ? "bag" : "");
   }
   return options.recording;
 }

@@ -6,11 +6,13 @@
 #include "range_image_mapping/io/actor_tracks.h"
 #include "range_image_mapping/io/kitti.h"
 #include "range_image_mapping/io/mesh_file.h"
+#include "range_image_mapping/io/pcd.h"
 #include "range_image_mapping/io/pcap_writer.h"
 #include "range_image_mapping/io/ply.h"
 #include "range_image_mapping/io/png.h"
 #include "range_image_mapping/io/pose_file.h"
 #include "range_image_mapping/ouster_packet_encoder.h"
+#include "range_image_mapping/sensor_catalog.h"
 #include "range_image_mapping/simulation/lidar_simulator.h"
 #include "range_image_mapping/simulation/scene_generator.h"
 #include "range_image_mapping/simulation/sensor_presets.h"
@@ -43,7 +45,7 @@ using simulation::SceneKind;
 struct Preset {
   const char* name;
   const char* scene;   // indoor, outdoor or traffic
-  const char* sensor;  // OS-0-128, OS-1-128 or hdl64
+  const char* sensor;  // OS-0-128, OS-1-128, hdl64 or a catalog name
   const char* motion;  // car, cart, handheld or traffic
   int frames;
   const char* formats;
@@ -58,6 +60,11 @@ const Preset kPresets[] = {
     {"kitti_like", "outdoor", "hdl64", "car", 300, "kitti"},
     {"traffic", "traffic", "OS-1-128", "traffic", 300, "pcap"},
     {"traffic_hdl64", "traffic", "hdl64", "traffic", 300, "kitti"},
+    // The drivers' sensors as a user records them: a folder of plain clouds.
+    {"outdoor_vlp16", "outdoor", "VLP-16", "car", 300, "pcd"},
+    {"outdoor_vlp32c", "outdoor", "VLP-32C", "car", 300, "pcd"},
+    {"outdoor_hdl32", "outdoor", "HDL-32E", "car", 300, "pcd"},
+    {"outdoor_pandar64", "outdoor", "Pandar64", "car", 300, "pcd"},
 };
 
 // The real sensors' metadata in the shared data folder are the defaults; the
@@ -78,11 +85,11 @@ struct SimulateOptions {
   std::string output_directory;
   int frames = 0;  // 0: the preset's
   uint32_t seed = 1;
-  std::string sensor;   // metadata JSON, OS-0-128, OS-1-128 or hdl64 (default: the preset's)
+  std::string sensor;   // metadata JSON, OS-0-128, OS-1-128, hdl64 or a catalog name (default: the preset's)
   std::string scene;    // indoor, outdoor, traffic or a PLY/OBJ mesh (default: the preset's)
   std::string motion;   // car, cart, handheld, traffic or a pose file (default: the preset's)
   bool no_actors = false;  // the traffic scene without its moving actors
-  std::string formats;  // comma-separated: pcap, bag, points-bag, kitti (default: the preset's)
+  std::string formats;  // comma-separated: pcap, bag, points-bag, kitti, pcd (default: the preset's)
   std::string profile = "RNG19_RFL8_SIG16_NIR16";
   std::string cloud_layout = "organized";
   double noise_sigma_m = 0.01;
@@ -101,8 +108,9 @@ struct SimulateOptions {
 
 struct Sensor {
   LidarModelConstPtr model;
-  std::optional<OusterMetadata> ouster;  // absent for the synthetic HDL-64
-  std::string frame;                     // os_lidar or velodyne
+  std::optional<OusterMetadata> ouster;  // absent for the synthetic HDL-64 and the catalog's sensors
+  std::string frame;                     // os_lidar, velodyne (KITTI) or lidar (a folder of clouds)
+  bool kitti = false;                    // KITTI's HDL-64E: its .bin folder reads back with this model
 };
 
 // A metadata file whose UDP profile is replaced: the simulated packets are in
@@ -127,9 +135,11 @@ std::string withUdpProfile(const std::string& json_text, UdpProfile profile) {
 
 Sensor makeSensor(const std::string& choice, UdpProfile profile) {
   Sensor sensor;
-  if (choice == "hdl64") {
-    sensor.model = std::make_shared<const LidarModel>(io::kittiHdl64Intrinsics());
-    sensor.frame = "velodyne";
+  if (const std::optional<LidarIntrinsics> named = catalogSensor(choice);
+      named && !std::filesystem::exists(choice)) {
+    sensor.kitti = named->sensor_model == kittiHdl64Intrinsics().sensor_model;
+    sensor.model = std::make_shared<const LidarModel>(*named);
+    sensor.frame = sensor.kitti ? "velodyne" : "lidar";
     return sensor;
   }
   std::string json;
@@ -147,7 +157,7 @@ Sensor makeSensor(const std::string& choice, UdpProfile profile) {
     json = simulation::ousterLikeMetadataJson(choice, profile);
   } else {
     throw std::invalid_argument("--sensor " + choice +
-                                ": neither a metadata file nor one of OS-0-128, OS-1-128, hdl64");
+                                ": neither a metadata file nor one of OS-0-128, OS-1-128, " + sensorCatalogNames());
   }
   sensor.ouster = parseOusterMetadata(withUdpProfile(json, profile));
   sensor.model = std::make_shared<const LidarModel>(sensor.ouster->intrinsics);
@@ -160,12 +170,17 @@ std::set<std::string> parseFormats(const std::string& text, const Sensor& sensor
   std::stringstream stream(text);
   for (std::string format; std::getline(stream, format, ',');) {
     if (format.empty()) continue;
-    if (format != "pcap" && format != "bag" && format != "points-bag" && format != "kitti")
+    if (format != "pcap" && format != "bag" && format != "points-bag" && format != "kitti" && format != "pcd")
       throw std::invalid_argument("--formats: unknown format '" + format +
-                                  "' (known: pcap, bag, points-bag, kitti)");
+                                  "' (known: pcap, bag, points-bag, kitti, pcd)");
     if ((format == "pcap" || format == "bag") && !sensor.ouster)
       throw std::invalid_argument("--formats " + format + " needs an Ouster sensor, not " +
                                   sensor.model->intrinsics().sensor_model);
+    // A KITTI velodyne folder reads back as KITTI's HDL-64E, whatever made it.
+    if (format == "kitti" && !sensor.kitti)
+      throw std::invalid_argument("--formats kitti: a KITTI velodyne folder is read as KITTI's HDL-64E, not " +
+                                  sensor.model->intrinsics().sensor_model +
+                                  "; write --formats pcd (a folder of clouds whose model rim estimates)");
 #ifndef RIM_WITH_ROSBAG
     if (format == "bag" || format == "points-bag")
       throw std::invalid_argument("--formats " + format +
@@ -176,6 +191,30 @@ std::set<std::string> parseFormats(const std::string& text, const Sensor& sensor
   return formats;
 }
 
+// A scan as a driver's plain cloud: the returns in the lidar frame, row by
+// row, with intensity (0..1), each point's firing time after the scan's first
+// column (velodyne_pointcloud's relative `time`) and its actor label.
+struct ScanPoints {
+  PointCloudInput cloud;
+  std::vector<uint32_t> labels;
+};
+
+ScanPoints scanPoints(const simulation::SimulatedScan& scan, const LidarModel& model) {
+  ScanPoints points;
+  PointCloudInput& cloud = points.cloud;
+  const std::vector<uint64_t>& column_ns = scan.raw.timestamp_ns;
+  for (int v = 0; v < model.rows(); ++v)
+    for (int u = 0; u < model.columns(); ++u)
+      if (scan.image.valid(v, u)) {
+        cloud.points.push_back(model.unproject(u, v, scan.image.at(v, u)));
+        cloud.intensity.push_back(scan.image.intensity.empty() ? 0.0f
+                                                               : scan.image.intensity[scan.image.index(v, u)] / 255.0f);
+        cloud.time_offset_s.push_back(static_cast<float>(double(column_ns[u] - column_ns.front()) * 1e-9));
+        points.labels.push_back(scan.true_actor[static_cast<std::size_t>(v) * model.columns() + u]);
+      }
+  return points;
+}
+
 int runSimulate(SimulateOptions options) {
   const Preset* preset = nullptr;
   for (const Preset& candidate : kPresets)
@@ -183,18 +222,23 @@ int runSimulate(SimulateOptions options) {
   if (!preset && (options.sensor.empty() || options.scene.empty() || options.motion.empty()))
     throw std::invalid_argument("give --preset, or all of --sensor, --scene and --motion");
   if (preset) {
+    // Another sensor than the preset's gets that sensor's own default formats.
+    if (options.formats.empty() && (options.sensor.empty() || options.sensor == preset->sensor))
+      options.formats = preset->formats;
     if (options.sensor.empty()) options.sensor = preset->sensor;
     if (options.motion.empty()) options.motion = preset->motion;
     if (options.scene.empty()) options.scene = preset->scene;
     if (options.frames == 0) options.frames = preset->frames;
-    if (options.formats.empty()) options.formats = preset->formats;
   }
   if (options.frames <= 0) options.frames = 100;
-  if (options.formats.empty()) options.formats = options.sensor == "hdl64" ? "kitti" : "pcap";
 
   const UdpProfile profile = udpProfileFromString(options.profile);
   const Sensor sensor = makeSensor(options.sensor, profile);
+  if (options.formats.empty()) options.formats = sensor.ouster ? "pcap" : sensor.kitti ? "kitti" : "pcd";
   const std::set<std::string> formats = parseFormats(options.formats, sensor);
+  if (options.cloud_layout == "ouster-ros" && !sensor.ouster)
+    throw std::invalid_argument("--cloud-layout ouster-ros is the Ouster driver's cloud; " +
+                                sensor.model->intrinsics().sensor_model + " is no Ouster sensor");
   const std::filesystem::path out(options.output_directory);
   std::filesystem::create_directories(out);
 
@@ -275,9 +319,22 @@ int runSimulate(SimulateOptions options) {
   if (formats.count("points-bag")) points_bag = std::make_unique<BagWriter>((out / "points.bag").string());
   const CloudLayout layout = options.cloud_layout == "plain"         ? CloudLayout::kPlain
                              : options.cloud_layout == "unorganized" ? CloudLayout::kUnorganized
+                             : options.cloud_layout == "ouster-ros"  ? CloudLayout::kOusterRos
+                             : options.cloud_layout == "velodyne"    ? CloudLayout::kVelodyne
+                             : options.cloud_layout == "hesai"       ? CloudLayout::kHesai
                                                                      : CloudLayout::kOrganized;
+  // The drivers' frames; ouster-ros stamps with the sensor's own clock (the
+  // simulation clock: TIME_FROM_INTERNAL_OSC), the others with the host's.
+  const std::string cloud_frame = layout == CloudLayout::kOusterRos  ? "os_sensor"
+                                  : layout == CloudLayout::kVelodyne ? "velodyne"
+                                  : layout == CloudLayout::kHesai    ? "hesai_lidar"
+                                                                     : sensor.frame;
+  const bool driver_layout =
+      layout == CloudLayout::kOusterRos || layout == CloudLayout::kVelodyne || layout == CloudLayout::kHesai;
 #endif
   if (formats.count("kitti")) std::filesystem::create_directories(out / "velodyne");
+  if (formats.count("pcd")) std::filesystem::create_directories(out / "clouds");
+  std::vector<double> scan_times_s;
   // Moving actors' ground truth: their poses per scan and per-pixel labels.
   std::vector<io::ActorTrack> tracks;
   for (std::size_t k = 0; k < actors.size(); ++k) {
@@ -343,26 +400,31 @@ int runSimulate(SimulateOptions options) {
     if (packet_bag) packet_bag->writeOusterScan(*encoder, scan.raw, kBagEpochNs);
     if (points_bag) {
       sensor_msgs::PointCloud2 cloud;
-      rangeImageToPointCloud2(scan.image, layout, sensor.frame, cloud);
-      cloud.header.stamp.fromNSec(kBagEpochNs + static_cast<int64_t>(start * 1e9));
+      if (driver_layout && layout != CloudLayout::kOusterRos) {
+        RangeImage host_clock = scan.image;  // header stamp and absolute point times on the bag's clock
+        host_clock.stamp_ns += kBagEpochNs;
+        for (uint64_t& time_ns : host_clock.column_timestamp_ns)
+          if (time_ns != 0) time_ns += kBagEpochNs;
+        rangeImageToPointCloud2(host_clock, layout, cloud_frame, cloud);
+      } else {
+        rangeImageToPointCloud2(scan.image, layout, cloud_frame, cloud);
+        if (!driver_layout) cloud.header.stamp.fromNSec(kBagEpochNs + static_cast<int64_t>(start * 1e9));
+      }
       points_bag->writePointCloud(cloud, "/points");
     }
 #endif
+    scan_times_s.push_back(start);
+    const ScanPoints points = scanPoints(scan, model);
+    if (formats.count("pcd")) {
+      char name[32];
+      std::snprintf(name, sizeof name, "%06d.pcd", frame);
+      io::writePcd((out / "clouds" / name).string(), points.cloud, io::PcdEncoding::kBinary);
+    }
     if (formats.count("kitti")) {
       char name[32];
       std::snprintf(name, sizeof name, "%06d.bin", frame);
-      std::vector<Eigen::Vector3f> points;
-      std::vector<float> intensities;
-      std::vector<uint32_t> point_labels;
-      for (int v = 0; v < model.rows(); ++v)
-        for (int u = 0; u < model.columns(); ++u)
-          if (scan.image.valid(v, u)) {
-            points.push_back(model.unproject(u, v, scan.image.at(v, u)));
-            intensities.push_back(scan.image.intensity.empty() ? 0.0f
-                                                               : scan.image.intensity[scan.image.index(v, u)] / 255.0f);
-            point_labels.push_back(scan.true_actor[static_cast<std::size_t>(v) * model.columns() + u]);
-          }
-      io::writeKittiVelodyne((out / "velodyne" / name).string(), points, intensities);
+      const std::vector<uint32_t>& point_labels = points.labels;
+      io::writeKittiVelodyne((out / "velodyne" / name).string(), points.cloud.points, points.cloud.intensity);
       if (!actors.empty()) {  // one little-endian uint32 per point of the .bin, as SemanticKITTI's .label
         std::snprintf(name, sizeof name, "%06d.label", frame);
         std::ofstream labels(out / "labels" / name, std::ios::binary);
@@ -375,6 +437,7 @@ int runSimulate(SimulateOptions options) {
   }
   if (pcap) pcap->close();
   column_times.close();
+  if (formats.count("pcd")) io::writeTimes((out / "clouds" / "times.txt").string(), scan_times_s);
 #ifdef RIM_WITH_ROSBAG
   if (packet_bag) packet_bag->close();
   if (points_bag) points_bag->close();
@@ -405,6 +468,9 @@ int runSimulate(SimulateOptions options) {
             << sensor.model->rows() << " x " << sensor.model->columns() << ") in " << seconds << " s; "
             << scene.mesh.triangles.size() << " scene triangles, " << surface.size()
             << " ground-truth surface samples; written to " << out.string() << "\n";
+  if (formats.count("pcd"))
+    std::cout << "plain clouds (no sensor model) in " << (out / "clouds").string() << ": give that folder to rim ("
+              << out.string() << " itself also holds scene.ply and surface.ply)\n";
   if (!actors.empty() && returns > 0)
     std::cout << actors.size() << " moving actors: " << 100.0 * actor_returns / returns << " % of the true returns ("
               << 100.0 * truck_returns / returns << " % on the trucks alongside)\n";
@@ -425,8 +491,8 @@ bool isIndoorPreset(const std::string& preset) {
   return false;
 }
 
-void simulatePreset(const std::string& preset, const std::string& directory, int frames,
-                    double surface_max_range_m, const std::string& extra_format) {
+std::string simulatePreset(const std::string& preset, const std::string& directory, int frames,
+                           double surface_max_range_m, const std::string& extra_format) {
   SimulateOptions options;
   options.surface_max_range_m = surface_max_range_m;
   for (const Preset& candidate : kPresets)
@@ -436,6 +502,8 @@ void simulatePreset(const std::string& preset, const std::string& directory, int
   options.output_directory = directory;
   options.frames = frames;
   runSimulate(options);
+  const std::filesystem::path clouds = std::filesystem::path(directory) / "clouds";
+  return options.formats.find("pcd") != std::string::npos ? clouds.string() : directory;
 }
 
 void addSimulateCommand(Command& rim) {
@@ -446,16 +514,21 @@ void addSimulateCommand(Command& rim) {
   command.option("--out,-o", options->output_directory, "output directory").required();
   command.option("--frames", options->frames, "number of scans (default: the preset's)").check(inRange(1, 100000));
   command.option("--seed", options->seed, "scene, motion and noise seed");
-  command.option("--sensor", options->sensor, "Ouster metadata JSON, OS-0-128, OS-1-128 or hdl64");
+  command.option("--sensor", options->sensor,
+                 "Ouster metadata JSON, OS-0-128, OS-1-128, hdl64, or a named model (" + sensorCatalogNames() + ")");
   command.option("--scene", options->scene, "indoor, outdoor, traffic (with moving actors), or a PLY/OBJ mesh");
   command.option("--motion", options->motion,
                  "car, cart, handheld, traffic (the traffic scene's stop-and-go), or a KITTI/TUM pose file");
   command.flag("--no-actors", options->no_actors, "the traffic scene without its moving actors");
-  command.option("--formats", options->formats, "comma-separated: pcap, bag, points-bag, kitti");
+  command.option("--formats", options->formats,
+                 "comma-separated: pcap, bag, points-bag (Ouster), kitti (HDL-64E), pcd (clouds/ of binary PCD "
+                 "scans with per-point time, any sensor)");
   command.option("--profile", options->profile, "Ouster UDP profile of the packets")
       .check(oneOf({"LEGACY", "RNG19_RFL8_SIG16_NIR16", "RNG19_RFL8_SIG16_NIR16_DUAL", "RNG15_RFL8_NIR8"}));
-  command.option("--cloud-layout", options->cloud_layout, "PointCloud2 layout in points.bag")
-      .check(oneOf({"organized", "unorganized", "plain"}));
+  command.option("--cloud-layout", options->cloud_layout,
+                 "PointCloud2 layout in points.bag: the simulator's (organized, unorganized, plain) or a driver's "
+                 "(ouster-ros, velodyne, hesai)")
+      .check(oneOf({"organized", "unorganized", "plain", "ouster-ros", "velodyne", "hesai"}));
   command.option("--noise", options->noise_sigma_m, "range noise sigma, metres").check(inRange(0.0, 1.0));
   command.option("--dropout", options->dropout, "probability of a lost return").check(inRange(0.0, 1.0));
   command.option("--min-range", options->min_range_m, "metres");
