@@ -178,6 +178,11 @@ TEST_F(SimulateCommand, NamedSensorsWritePlainCloudsOnTheirBeams) {
       off_beam += !on_beam;
     }
     EXPECT_EQ(off_beam, 0u) << "of " << cloud.size();
+    // The folder itself is a recording of its clouds/ (scene.ply and
+    // surface.ply beside them are no scans), with its ground truth.
+    const test::RunResult odometry = rim("odometry '" + out + "' --out '" + out + "/est.txt'");
+    ASSERT_EQ(odometry.exit_code, 0) << odometry.err;
+    EXPECT_NE((odometry.out + odometry.err).find("2 .pcd scans in"), std::string::npos) << odometry.err;
   }
 }
 

@@ -274,16 +274,24 @@ Recording openRecording(const RecordingOptions& options) {
   } else if (!is_folder && input.extension() == ".bag") {
     openBag(recording, options);
   } else if ((!is_folder && hasCloudExtension(input)) ||
-             (is_folder && !fs::exists(input / "capture.pcap") && !cloudFiles(input, options.input).empty())) {
+             (is_folder && !fs::exists(input / "capture.pcap") &&
+              (fs::is_directory(input / "clouds") || !cloudFiles(input, options.input).empty()))) {
+    // A rim simulate folder keeps a sensor's plain clouds in clouds/, beside
+    // scene.ply and surface.ply, which are no scans.
+    const fs::path cloud_folder = is_folder && fs::is_directory(input / "clouds") ? input / "clouds" : input;
     recording.kind = RecordingKind::kCloudFiles;
-    recording.cloud_files = is_folder ? cloudFiles(input, options.input) : std::vector<std::string>{input.string()};
+    recording.cloud_files =
+        is_folder ? cloudFiles(cloud_folder, cloud_folder.string()) : std::vector<std::string>{input.string()};
+    if (recording.cloud_files.empty())
+      throw RecordingError("INPUT " + options.input + ": no scans (.bin, .pcd, .ply) in " + cloud_folder.string());
     if (!is_folder) sequence = input.parent_path();
     recording.frame = "lidar";
     recording.description = std::to_string(recording.cloud_files.size()) + " " +
                             fs::path(recording.cloud_files.front()).extension().string() + " scans in " +
-                            options.input;
+                            cloud_folder.string();
     recording.expected_frames = int(recording.cloud_files.size());
-    if (is_folder && fs::exists(input / "times.txt")) recording.times_s = readTimes((input / "times.txt").string());
+    if (is_folder && fs::exists(cloud_folder / "times.txt"))
+      recording.times_s = readTimes((cloud_folder / "times.txt").string());
   } else {
     openOusterCapture(recording, options, sequence);
   }
