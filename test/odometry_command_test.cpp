@@ -2,6 +2,7 @@
 // comes out within centimetres of its ground truth, in both pose formats
 // with per-frame statistics, and bad requests fail with a named error.
 #include "range_image_mapping/evaluation/trajectory_metrics.h"
+#include "range_image_mapping/io/kitti.h"
 #include "range_image_mapping/io/pose_file.h"
 #include "rim_command.h"
 
@@ -55,7 +56,9 @@ TEST_F(OdometryCommand, BadRequestsNameTheProblem) {
   run = rim("odometry " + path("empty") + " --out " + path("est.txt"));
   EXPECT_NE(run.exit_code, 0);
   EXPECT_NE(run.err.find("no KITTI scans"), std::string::npos) << run.err;
-  run = rim("odometry " + path("empty") + " --sensor " + path("no_such_sensor.yaml") + " --out " + path("est.txt"));
+  std::filesystem::create_directories(path("one/velodyne"));
+  io::writeKittiVelodyne(path("one/velodyne/000000.bin"), {Eigen::Vector3f(10.0f, 0.0f, 0.0f)}, {});
+  run = rim("odometry " + path("one") + " --sensor " + path("no_such_sensor.yaml") + " --out " + path("est.txt"));
   EXPECT_NE(run.exit_code, 0);
   EXPECT_NE(run.err.find("no_such_sensor.yaml"), std::string::npos) << run.err;
 }
