@@ -21,7 +21,7 @@ fuzzers=(ouster_packet_fuzzer ouster_metadata_fuzzer)
 
 cmake -S "$repository" -B "$build" -DRIM_FUZZ=ON -DCMAKE_CXX_COMPILER=clang++ \
   -DCMAKE_C_COMPILER=clang -DRIM_CORE_ONLY=ON -DBUILD_TESTING=OFF -DRIM_BENCHMARKS=OFF \
-  -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+  -DCMAKE_BUILD_TYPE=RelWithDebInfo -DPYTHON_EXECUTABLE=/usr/bin/python3 >/dev/null
 cmake --build "$build" -j2 --target "${fuzzers[@]}" >/dev/null
 
 work="$(mktemp -d)"
