@@ -1,5 +1,7 @@
 #include "range_image_mapping/ros/range_image_conversions.h"
 
+#include "range_image_mapping/io/rosbag_reader.h"
+
 #include <sensor_msgs/PointField.h>
 #include <sensor_msgs/point_cloud2_iterator.h>
 
@@ -67,15 +69,6 @@ bool sameTables(const LidarIntrinsics& tables, const LidarRangeImage& message) {
          tables.column_window[0] == message.column_window[0] &&
          tables.column_window[1] == message.column_window[1] &&
          tables.sensor_model == message.sensor_model;
-}
-
-// ------------------------------------------------------------ PointCloud2
-
-template <typename T>
-T readUnaligned(const uint8_t* bytes) {
-  T value;
-  std::memcpy(&value, bytes, sizeof(T));
-  return value;
 }
 
 }  // namespace
@@ -281,26 +274,17 @@ void toCovarianceMessage(const Eigen::Matrix<double, 6, 6>& covariance, boost::a
 // ------------------------------------------------------------ Ouster packets
 
 PacketBytes ousterPacketBytes(const topic_tools::ShapeShifter& message, std::vector<uint8_t>& buffer) {
-  // Both drivers' PacketMsg are exactly "uint8[] buf"; the md5 of that definition
-  // guards against a future message of the same name with more fields.
-  static const char* const kPacketMd5 = "4f7b5949e76f86d01e96b0e33ba9b5e3";
-  const std::string& datatype = message.getDataType();
-  if ((datatype != "ouster_ros/PacketMsg" && datatype != "ouster_sensor_msgs/PacketMsg") ||
-      message.getMD5Sum() != kPacketMd5)
-    fail("lidar packets: message type '" + datatype + "' (md5 " + message.getMD5Sum() +
-         ") is not an Ouster packet; expected ouster_ros/PacketMsg or "
-         "ouster_sensor_msgs/PacketMsg (uint8[] buf, md5 " + kPacketMd5 + ")");
   buffer.resize(message.size());
   ros::serialization::OStream stream(buffer.data(), static_cast<uint32_t>(buffer.size()));
   message.write(stream);
-  if (buffer.size() < sizeof(uint32_t))
-    fail("lidar packets: " + datatype + " of " + std::to_string(buffer.size()) +
-         " bytes has no length prefix");
-  const uint32_t length = readUnaligned<uint32_t>(buffer.data());
-  if (length != buffer.size() - sizeof(uint32_t))
-    fail("lidar packets: " + datatype + " says buf has " + std::to_string(length) +
-         " bytes, the message carries " + std::to_string(buffer.size() - sizeof(uint32_t)));
-  return PacketBytes{buffer.data() + sizeof(uint32_t), length};
+  try {
+    // The same checks (type, md5, length prefix) as a bag's packets get.
+    const io::BagPacket packet =
+        io::ousterPacketPayload(buffer.data(), buffer.size(), message.getDataType(), message.getMD5Sum());
+    return PacketBytes{packet.data, packet.size};
+  } catch (const io::BagError& error) {
+    fail(error.what());
+  }
 }
 
 }  // namespace range_image_mapping
