@@ -66,7 +66,7 @@ TEST_F(SensorCommandTest, CheckWarnsWhenTheModelDoesNotFit) {
   std::ofstream(path("wrong.yaml")) << "rows: 4\ncolumns: 512\naltitude_deg: [3, 1, -1, -3]\n";
   const RunResult check = rim("sensor check " + path("wrong.yaml") + " " + folder);
   ASSERT_EQ(check.exit_code, 0) << check.out << check.err;
-  EXPECT_NE(check.out.find("warning: the model explains only"), std::string::npos) << check.out;
+  EXPECT_NE(check.out.find("warning: the sensor model explains only"), std::string::npos) << check.out;
 }
 
 TEST_F(SensorCommandTest, BadSensorFileIsNamed) {

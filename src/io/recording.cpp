@@ -11,6 +11,7 @@
 #include "range_image_mapping/point_cloud_layout.h"
 #include "range_image_mapping/point_cloud_projection.h"
 #include "range_image_mapping/scan_batcher.h"
+#include "range_image_mapping/sensor_model_report.h"
 
 #include <json/json.h>
 
@@ -87,15 +88,6 @@ PointCloudInput readCloudFile(const std::string& path, uint64_t stamp_ns) {
   return cloud;
 }
 
-std::string percent(double share) {
-  char text[32];
-  std::snprintf(text, sizeof text, "%.1f %%", 100.0 * share);
-  return text;
-}
-
-// Below this share of kept points a model does not explain the data (issue 14: 95 %).
-constexpr double kKeptWarningShare = 0.95;
-
 // The model of a point-cloud recording: the sensor file's, KITTI's HDL-64E,
 // or estimated from the first clouds; with its fit on those clouds.
 void chooseCloudModel(Recording& recording, const RecordingOptions& options) {
@@ -138,27 +130,14 @@ void chooseCloudModel(Recording& recording, const RecordingOptions& options) {
   }
   if (!info.fit && !clouds.empty()) info.fit = measureSensorModelFit(clouds, recording.model, info.ring_to_row);
   const LidarIntrinsics& intrinsics = recording.model->intrinsics();
-  double highest = -90.0, lowest = 90.0;
-  for (const double altitude : intrinsics.altitude_rad)
-    highest = std::max(highest, altitude * 180.0 / M_PI), lowest = std::min(lowest, altitude * 180.0 / M_PI);
-  char size[160];
-  std::snprintf(size, sizeof size, "%d beams from %+.2f to %+.2f deg, %d columns", intrinsics.rows, highest, lowest,
-                intrinsics.columns);
-  info.summary = "sensor model " + info.source + ": " + size;
+  info.summary = "sensor model " + info.source + ": " + describeSensorModel(intrinsics);
   if (recording.kind != RecordingKind::kKittiVelodyne || !options.sensor.empty())
     recording.description += " (sensor model " + (options.sensor.empty() ? info.source : options.sensor) + ": " +
                              std::to_string(intrinsics.rows) + " x " + std::to_string(intrinsics.columns) + ")";
   if (info.fit) {
-    const SensorModelFit& fit = *info.fit;
-    char residual[120];
-    std::snprintf(residual, sizeof residual, "residual %.3f deg in elevation, %.3f deg in azimuth (RMS)",
-                  fit.elevation_residual_deg, fit.azimuth_residual_deg);
-    info.summary += "; on the first " + std::to_string(fit.scans) + " scans it keeps " + percent(fit.keptShare()) +
-                    " of the points (" + percent(fit.outsideShare()) + " outside its field of view, " +
-                    percent(fit.occludedShare()) + " lost to a nearer point in the same pixel), " + residual;
-    if (fit.keptShare() < kKeptWarningShare)
-      info.warning = "the sensor model (" + info.source + ") keeps only " + percent(fit.keptShare()) +
-                     " of the points, under " + percent(kKeptWarningShare) + ": " + fix;
+    info.summary += "; on the first " + describeSensorModelFit(*info.fit);
+    if (const std::optional<std::string> warning = sensorModelFitWarning(*info.fit, fix))
+      info.warning = info.source + ": " + *warning;
   }
 }
 

@@ -5,6 +5,7 @@
 #include "commands.h"
 #include "outputs.h"
 
+#include "range_image_mapping/sensor_model_report.h"
 #include "range_image_mapping/io/kitti.h"
 #include "range_image_mapping/io/recording.h"
 #include "range_image_mapping/io/sensor_file.h"
@@ -21,7 +22,6 @@ namespace {
 namespace fs = std::filesystem;
 
 // Below this share of kept points a model does not explain the data (issue 14: 95 %).
-constexpr double kKeptWarningShare = 0.95;
 
 struct SensorCommandOptions {
   std::string input;
@@ -67,14 +67,10 @@ std::vector<PointCloudInput> readClouds(const SensorCommandOptions& options, std
 }
 
 void printFit(const SensorModelFit& fit) {
-  std::printf("%zu clouds, %zu measured points: %.2f %% kept, %.2f %% outside the field of view, %.2f %% lost to a "
-              "nearer point in the same pixel; residual %.4f deg in elevation, %.4f deg in azimuth (RMS)\n",
-              fit.scans, fit.measured_points, 100.0 * fit.keptShare(), 100.0 * fit.outsideShare(),
-              100.0 * fit.occludedShare(), fit.elevation_residual_deg, fit.azimuth_residual_deg);
-  if (fit.keptShare() < kKeptWarningShare)
-    std::printf("warning: the model explains only %.1f %% of the points (under %.0f %%): a wrong sensor, field of "
-                "view or frame; try rim sensor estimate on this recording\n",
-                100.0 * fit.keptShare(), 100.0 * kKeptWarningShare);
+  std::printf("%s\n", describeSensorModelFit(fit).c_str());
+  if (const std::optional<std::string> warning =
+          sensorModelFitWarning(fit, "try rim sensor estimate on this recording"))
+    std::printf("warning: %s\n", warning->c_str());
 }
 
 void runEstimate(const SensorCommandOptions& options) {
