@@ -137,7 +137,7 @@ void chooseCloudModel(Recording& recording, const RecordingOptions& options) {
   if (info.fit) {
     info.summary += "; on the first " + describeSensorModelFit(*info.fit);
     if (const std::optional<std::string> warning = sensorModelFitWarning(*info.fit, fix))
-      info.warning = info.source + ": " + *warning;
+      info.warning = *warning + " (the model: " + info.source + ")";
   }
 }
 
