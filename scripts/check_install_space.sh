@@ -57,7 +57,10 @@ clean_env() {
 echo "== catkin_make install (CATKIN_ENABLE_TESTING=OFF, RIM_BENCHMARKS=OFF) into $prefix"
 mkdir -p "$workspace/src"
 ln -sfn "$repository" "$workspace/src/range_image_mapping"
-if ! (cd "$workspace" && clean_env catkin_make install -DPYTHON_EXECUTABLE=/usr/bin/python3 \
+# shellcheck source=compiler_cache.sh
+source "$repository/scripts/compiler_cache.sh"
+if ! (cd "$workspace" && clean_env CCACHE_BASEDIR="$CCACHE_BASEDIR" catkin_make install \
+  -DPYTHON_EXECUTABLE=/usr/bin/python3 "${compiler_cache_options[@]}" \
   -DCMAKE_BUILD_TYPE=Release -DCATKIN_ENABLE_TESTING=OFF -DRIM_BENCHMARKS=OFF \
   -DCMAKE_INSTALL_PREFIX="$prefix" -j2 >"$workspace/build.log" 2>&1); then
   tail -n 60 "$workspace/build.log"

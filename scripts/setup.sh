@@ -32,6 +32,9 @@ packages=(
 # OpenVDB: VDBFusion from ../shared/peers, vdbfusion_comparison_benchmark).
 benchmarks=${RIM_BENCHMARKS:-1}
 [ "$benchmarks" = 0 ] || packages+=(libbenchmark-dev libpcl-dev libopenvdb-dev)
+# The test run's objects are cached, so that scripts/check_install_space.sh
+# (CI's next step, a second workspace with the same flags) compiles nothing twice.
+[ "$mode" = test ] && packages+=(ccache)
 
 install_dependencies() {
   [ "${RIM_SKIP_INSTALL:-0}" = 1 ] && return
@@ -67,8 +70,11 @@ build() {
   [ "$mode" = test ] && targets+=(tests)
   local benchmark_option=ON
   [ "$benchmarks" = 0 ] && benchmark_option=OFF
+  # shellcheck source=compiler_cache.sh
+  source "$repository/scripts/compiler_cache.sh"
   if ! (cd "$workspace" && catkin_make -DPYTHON_EXECUTABLE=/usr/bin/python3 \
-    -DCMAKE_BUILD_TYPE=Release -DRIM_BENCHMARKS=$benchmark_option -j2 "${targets[@]}" \
+    -DCMAKE_BUILD_TYPE=Release -DRIM_BENCHMARKS=$benchmark_option "${compiler_cache_options[@]}" \
+    -j2 "${targets[@]}" \
     >"$workspace/build.log" 2>&1); then
     tail -n 60 "$workspace/build.log"
     echo "build failed; the whole log is $workspace/build.log" >&2
