@@ -59,7 +59,7 @@ mkdir -p "$workspace/src"
 ln -sfn "$repository" "$workspace/src/range_image_mapping"
 # shellcheck source=compiler_cache.sh
 source "$repository/scripts/compiler_cache.sh"
-if ! (cd "$workspace" && clean_env CCACHE_BASEDIR="$CCACHE_BASEDIR" catkin_make install \
+if ! (cd "$workspace" && clean_env CCACHE_BASEDIR="$CCACHE_BASEDIR" CCACHE_DIR="$CCACHE_DIR" catkin_make install \
   -DPYTHON_EXECUTABLE=/usr/bin/python3 "${compiler_cache_options[@]}" \
   -DCMAKE_BUILD_TYPE=Release -DCATKIN_ENABLE_TESTING=OFF -DRIM_BENCHMARKS=OFF \
   -DCMAKE_INSTALL_PREFIX="$prefix" -j2 >"$workspace/build.log" 2>&1); then
