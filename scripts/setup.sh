@@ -26,7 +26,7 @@ packages=(
   librostest-dev libgtest-dev
   libeigen3-dev libtbb-dev libjsoncpp-dev libyaml-cpp-dev libpcap-dev libboost-program-options-dev libpng-dev libssl-dev
   libnanoflann-dev libembree-dev robin-map-dev gnuplot-nox clang liboctomap-dev
-  libstd-srvs-dev libdiagnostic-updater-dev libmessage-filters-dev libboost-dev
+  libstd-srvs-dev libdiagnostic-updater-dev libboost-dev
 )
 # Only the benchmark programs need these (PCL: the ICP/GICP baselines;
 # OpenVDB: VDBFusion from ../shared/peers, vdbfusion_comparison_benchmark).

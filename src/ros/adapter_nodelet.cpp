@@ -9,6 +9,7 @@
 #include "range_image_mapping/ouster_metadata.h"
 #include "range_image_mapping/ouster_packet.h"
 #include "range_image_mapping/point_cloud_projection.h"
+#include "range_image_mapping/receive_time_stamps.h"
 #include "range_image_mapping/ros/parameters.h"
 #include "range_image_mapping/ros/steady_throttle.h"
 #include "range_image_mapping/ros/range_image_conversions.h"
@@ -158,6 +159,8 @@ class AdapterNodelet : public nodelet::Nodelet {
   void diagnoseClouds(diagnostic_updater::DiagnosticStatusWrapper& status);
 
   void publish(const RangeImage& image, const std_msgs::Header& header);
+  // stamp_source receive_time: the receipt of the scan's first packet, kept increasing.
+  ros::Time receiveStamp(uint32_t frame_id, uint64_t sensor_stamp_ns);
   void publishStaticTransform(const LidarIntrinsics& intrinsics);
   void onStatisticsTimer(const ros::SteadyTimerEvent&);
   BatcherStatistics batcherStatistics() const;
@@ -198,6 +201,9 @@ class AdapterNodelet : public nodelet::Nodelet {
   // flush, so it is one of these two.
   uint32_t current_frame_id_ = 0, previous_frame_id_ = 0;
   ros::Time current_frame_receipt_, previous_frame_receipt_;
+  // Receive-time stamps kept increasing where ROS time stood still.
+  std::optional<ReceiveTimeStamps> receive_stamps_;
+  std::size_t restamped_scans_ = 0, logged_restamped_scans_ = 0;
   bool revolution_in_progress_ = false;
   ros::SteadyTime last_packet_time_;
   ros::Time last_receipt_;  // to notice ROS time jumping back (a bag loop)
@@ -230,7 +236,7 @@ class AdapterNodelet : public nodelet::Nodelet {
   BatcherStatistics logged_batcher_statistics_;
   ProjectionStatistics logged_projection_statistics_;
   AdapterDrops logged_drops_;
-  SteadyThrottle foreign_packet_log_, no_metadata_log_, packet_error_log_, scan_error_log_,
+  SteadyThrottle foreign_packet_log_, no_metadata_log_, packet_error_log_, scan_error_log_, restamp_log_,
       flush_error_log_, cloud_error_log_;
 };
 
@@ -318,6 +324,7 @@ void AdapterNodelet::useMetadata(const OusterMetadata& metadata, const std::stri
   replaceBatcher(std::move(batcher));
   model_ = std::move(model);
   metadata_ = metadata;
+  receive_stamps_.emplace(static_cast<int64_t>(std::llround(1e9 / metadata.frequency_hz)));
   NODELET_INFO("Ouster metadata from %s: %s %s, %s, %s, %dx%d", origin.c_str(),
                metadata.prod_line.c_str(), metadata.serial.c_str(), metadata.firmware.c_str(),
                toString(metadata.profile), model_->rows(), model_->columns());
@@ -351,6 +358,7 @@ void AdapterNodelet::onPacketMessage(const topic_tools::ShapeShifter::ConstPtr& 
     last_packet_time_ = ros::SteadyTime::now();
     if (batcher_ && !last_receipt_.isZero() && receipt < last_receipt_) {
       NODELET_WARN("ROS time jumped back by %.3f s (bag loop or restart)", (last_receipt_ - receipt).toSec());
+      if (receive_stamps_) receive_stamps_->restart();
       const PacketFormat& format = batcher_->format();
       time_jump_packets_left_ = format.columns() / format.columnsPerPacket() + 1;
     }
@@ -430,17 +438,35 @@ void AdapterNodelet::onScan(const LidarScan& scan) {
     if (parameters_.stamp_source == StampSource::kSensorClock)
       header.stamp.fromNSec(image.stamp_ns);
     else
-      header.stamp = scan.frame_id == current_frame_id_ && !current_frame_receipt_.isZero()
-                         ? current_frame_receipt_
-                     : scan.frame_id == previous_frame_id_ && !previous_frame_receipt_.isZero()
-                         ? previous_frame_receipt_
-                         : ros::Time::now();
+      header.stamp = receiveStamp(scan.frame_id, image.stamp_ns);
     publish(image, header);
   } catch (const std::exception& error) {
     ++drops_.failed_scans;
     if (scan_error_log_.allow(parameters_.statistics_period_s))
       NODELET_ERROR("scan %u dropped: %s", scan.frame_id, error.what());
   }
+}
+
+ros::Time AdapterNodelet::receiveStamp(uint32_t frame_id, uint64_t sensor_stamp_ns) {
+  const ros::Time receipt = frame_id == current_frame_id_ && !current_frame_receipt_.isZero() ? current_frame_receipt_
+                            : frame_id == previous_frame_id_ && !previous_frame_receipt_.isZero()
+                                ? previous_frame_receipt_
+                                : ros::Time::now();
+  if (!receive_stamps_) return receipt;
+  const ReceiveTimeStamps::Stamp stamp =
+      receive_stamps_->next(static_cast<int64_t>(receipt.toNSec()), static_cast<int64_t>(sensor_stamp_ns));
+  ros::Time repaired;
+  repaired.fromNSec(static_cast<uint64_t>(stamp.stamp_ns));
+  if (!stamp.repaired) return repaired;
+  ++restamped_scans_;
+  if (restamp_log_.allow(parameters_.statistics_period_s))
+    NODELET_WARN("scan %u: ROS time did not advance since the previous scan (received at %.3f s): stamped %.3f s, "
+                 "the sensor clock's interval after it, so that no scan is refused as out of order. ROS time is "
+                 "stalling: a bag replay's /clock delivered late on a loaded machine (replay slower, e.g. "
+                 "rate:=0.5), or the host clock stepped; with a PTP-synchronised sensor use stamp_source: "
+                 "sensor_clock. %zu scans restamped so far",
+                 frame_id, receipt.toSec(), repaired.toSec(), restamped_scans_);
+  return repaired;
 }
 
 // A replay that ends, or a sensor that stops, leaves its last revolution in the
@@ -719,13 +745,14 @@ void AdapterNodelet::onStatisticsTimer(const ros::SteadyTimerEvent&) {
   const std::size_t point_drops = projected.outside_model - projected_before.outside_model;
   const std::size_t missing_clouds = cloud_gaps_.missing() - logged_missing_clouds_;
   const std::size_t other_drops = drops_.total() - logged_drops_.total() + missing_clouds;
-  if (packet_drops + incomplete + point_drops + other_drops > 0) {
+  const std::size_t restamped = restamped_scans_ - logged_restamped_scans_;
+  if (packet_drops + incomplete + point_drops + other_drops + restamped > 0) {
     NODELET_WARN(
         "last %.0f s: packets dropped %zu (wrong size %zu, malformed %zu, bad checksum %zu, stale %zu, "
         "not Ouster packets %zu, no metadata %zu); incomplete scans %zu (%zu columns missing); "
         "points outside the model %zu (no-return points, not counted: NaN %zu, at the origin %zu); "
         "clouds rejected %zu, missing %zu (from the stamps); "
-        "scans failed %zu",
+        "scans failed %zu; scans restamped (ROS time stood still) %zu",
         parameters_.statistics_period_s, packet_drops, batcher.wrong_size - before.wrong_size,
         batcher.malformed - before.malformed, batcher.bad_checksum - before.bad_checksum,
         batcher.stale - before.stale,
@@ -735,8 +762,9 @@ void AdapterNodelet::onStatisticsTimer(const ros::SteadyTimerEvent&) {
         projected.non_finite - projected_before.non_finite,
         projected.no_return - projected_before.no_return,
         drops_.rejected_clouds - logged_drops_.rejected_clouds, missing_clouds,
-        drops_.failed_scans - logged_drops_.failed_scans);
+        drops_.failed_scans - logged_drops_.failed_scans, restamped);
   }
+  logged_restamped_scans_ = restamped_scans_;
   logged_batcher_statistics_ = batcher;
   logged_projection_statistics_ = projection_statistics_;
   logged_drops_ = drops_;

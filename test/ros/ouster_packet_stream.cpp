@@ -12,6 +12,7 @@
 
 #include <gtest/gtest.h>
 #include <ros/ros.h>
+#include <rosgraph_msgs/Clock.h>
 #include <std_msgs/String.h>
 #include <topic_tools/shape_shifter.h>
 
@@ -167,6 +168,43 @@ TEST_F(OusterPacketStreamTest, EarlyPacketsIncompleteScansBadMetadataAndASensorS
     ASSERT_TRUE(lb_expected.count(image->frame_id)) << "unexpected frame " << image->frame_id;
     expectSameImage(*image, lb_expected.at(image->frame_id));
     EXPECT_EQ(image->sensor_model, lb_metadata.intrinsics.sensor_model);
+  }
+}
+
+// Run by adapter_standing_clock.test (use_sim_time, this node owns /clock):
+// ROS time stands still while three revolutions arrive, as a starved /clock
+// does on a loaded machine. Receive-time stamps must still increase, by the
+// sensor clock's intervals, so that the Odometry refuses none as out of order.
+TEST_F(OusterPacketStreamTest, StandingClockStillGivesIncreasingStamps) {
+  RIM_REQUIRE_DATA(lb_pcap, "ouster-pcaps/OS-1-128_v2.3.0_1024x10_lb_n3.pcap");
+  RIM_REQUIRE_DATA(lb_json, "ouster-pcaps/OS-1-128_v2.3.0_1024x10.json");
+  ASSERT_TRUE(ros::Time::isSimTime()) << "run through adapter_standing_clock.test (use_sim_time)";
+  ros::Publisher clock_publisher = node_.advertise<rosgraph_msgs::Clock>("/clock", 1);
+  ASSERT_TRUE(spinUntil([&] { return clock_publisher.getNumSubscribers() > 0; }, timeout_s_));
+  rosgraph_msgs::Clock frozen;
+  frozen.clock = ros::Time(100, 0);
+  for (int i = 0; i < 5; ++i) {
+    clock_publisher.publish(frozen);
+    spinFor(0.1);
+  }
+  const OusterMetadata lb_metadata = loadOusterMetadata(lb_json);
+  publishMetadata(readText(lb_json));
+  spinFor(1.5);
+  publishPackets(lidarPackets(lb_pcap, lb_metadata));
+  ASSERT_TRUE(spinUntil([&] { return images_.size() >= 3; }, timeout_s_))
+      << images_.size() << " of 3 lb_n3 images within " << timeout_s_ << " s";
+  const auto sensor_stamp_ns = [](const LidarRangeImage& image) {
+    for (const uint64_t stamp : image.column_timestamps)
+      if (stamp != 0) return static_cast<int64_t>(stamp);
+    return int64_t{0};
+  };
+  EXPECT_EQ(images_[0]->header.stamp, frozen.clock);
+  for (std::size_t i = 1; i < images_.size(); ++i) {
+    SCOPED_TRACE("image " + std::to_string(i));
+    EXPECT_GT(images_[i]->header.stamp, images_[i - 1]->header.stamp) << "stamps must increase";
+    EXPECT_EQ(static_cast<int64_t>(images_[i]->header.stamp.toNSec() - images_[i - 1]->header.stamp.toNSec()),
+              sensor_stamp_ns(*images_[i]) - sensor_stamp_ns(*images_[i - 1]))
+        << "spaced by the sensor clock";
   }
 }
 
