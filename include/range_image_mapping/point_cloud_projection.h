@@ -66,10 +66,20 @@ struct ProjectionStatistics {
   void add(const ProjectionStatistics& scan);
 };
 
+// An organized cloud of the model's H x W read in column order `order`: the
+// median angle (rad) between a sample of its points (every 7th column of
+// every row) and their pixels' rays; NaN for other shapes or under 100
+// measured points in the sample. Near 0 when the cloud's pixels are the
+// model's; about pi when, e.g., the clouds are in a frame turned half a turn
+// from the model's (ouster-ros's os_sensor against a model of os_lidar).
+double organizedOffRayAngle(const PointCloudInput& cloud, const LidarModel& model, ColumnOrder order);
+
 // Projects into a staggered image of model's size, in one pass over the points
 // with the image itself as the depth buffer (the nearest return per pixel wins):
 // - organized clouds of exactly the model's H x W map pixel for pixel (after
-//   re-staggering destaggered input); other organized shapes count as unorganized;
+//   re-staggering destaggered input) when their pixels are the model's (their
+//   points within half a column of their pixels' rays); other organized
+//   clouds count as unorganized;
 // - with a ring_to_row map and a ring field, row = ring_to_row[ring] and the
 //   column comes from the azimuth minus the row's theta_lut;
 // - otherwise each point goes through model.project() (Pi).

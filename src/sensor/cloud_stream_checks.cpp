@@ -39,35 +39,12 @@ double CloudGapCounter::periodSeconds() const {
 }
 
 std::optional<ColumnOrder> detectOrganizedColumnOrder(const PointCloudInput& cloud, const LidarModel& model) {
-  const int rows = model.rows(), columns = model.columns();
-  if (!cloud.isOrganized() || cloud.organized_height != rows || cloud.organized_width != columns ||
-      cloud.size() != std::size_t(rows) * columns)
-    return std::nullopt;
   const std::vector<int>& shifts = model.intrinsics().pixel_shift_by_row;
   if (shifts.empty() || std::all_of(shifts.begin(), shifts.end(), [&](int s) { return s == shifts[0]; }))
     return std::nullopt;
-  // The angle between each point and its pixel's ray, under each order, over
-  // a sample of the points (every 7th column of every row).
-  std::vector<double> staggered_error, destaggered_error;
-  const auto angleOffRay = [&](const Eigen::Vector3f& point, int column, int row) {
-    const float range = model.direction(column, row).dot(point - model.offset(column, row));
-    return double((model.unproject(column, row, range) - point).norm()) / double(point.norm());
-  };
-  for (int row = 0; row < rows; ++row) {
-    const int shift = ((shifts[row] % columns) + columns) % columns;
-    for (int input_column = 0; input_column < columns; input_column += 7) {
-      const Eigen::Vector3f& point = cloud.points[std::size_t(row) * columns + input_column];
-      if (!point.allFinite() || point.squaredNorm() < 1e-6f) continue;
-      staggered_error.push_back(angleOffRay(point, input_column, row));
-      destaggered_error.push_back(angleOffRay(point, (input_column - shift + columns) % columns, row));
-    }
-  }
-  if (staggered_error.size() < 100) return std::nullopt;
-  const auto median = [](std::vector<double>& values) {
-    std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
-    return values[values.size() / 2];
-  };
-  const double staggered = median(staggered_error), destaggered = median(destaggered_error);
+  const double staggered = organizedOffRayAngle(cloud, model, ColumnOrder::kStaggered);
+  const double destaggered = organizedOffRayAngle(cloud, model, ColumnOrder::kDestaggered);
+  if (!std::isfinite(staggered) || !std::isfinite(destaggered)) return std::nullopt;
   // The right order puts points on their rays (to the cloud's float rounding);
   // the wrong one several columns off them.
   constexpr double kOnRay = 1e-3;  // rad

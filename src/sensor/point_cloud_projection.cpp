@@ -154,6 +154,29 @@ void projectThroughModel(const PointCloudInput& cloud, const LidarModel& model, 
 
 }  // namespace
 
+double organizedOffRayAngle(const PointCloudInput& cloud, const LidarModel& model, ColumnOrder order) {
+  const int rows = model.rows(), columns = model.columns();
+  if (!cloud.isOrganized() || cloud.organized_height != rows || cloud.organized_width != columns ||
+      cloud.size() != std::size_t(rows) * columns)
+    return std::numeric_limits<double>::quiet_NaN();
+  const std::vector<int>& shifts = model.intrinsics().pixel_shift_by_row;
+  std::vector<double> angles;
+  for (int row = 0; row < rows; ++row) {
+    const int shift = order == ColumnOrder::kDestaggered ? ((shifts[row] % columns) + columns) % columns : 0;
+    for (int input_column = 0; input_column < columns; input_column += 7) {
+      const Eigen::Vector3f& point = cloud.points[std::size_t(row) * columns + input_column];
+      if (!point.allFinite() || point.squaredNorm() < 1e-6f) continue;
+      const int column = (input_column - shift + columns) % columns;
+      const Eigen::Vector3f& ray = model.direction(column, row);
+      const Eigen::Vector3f from_origin = point - model.offset(column, row);
+      angles.push_back(std::atan2(double(ray.cross(from_origin).norm()), double(ray.dot(from_origin))));
+    }
+  }
+  if (angles.size() < 100) return std::numeric_limits<double>::quiet_NaN();
+  std::nth_element(angles.begin(), angles.begin() + angles.size() / 2, angles.end());
+  return angles[angles.size() / 2];
+}
+
 void ProjectionStatistics::add(const ProjectionStatistics& scan) {
   input_points += scan.input_points;
   non_finite += scan.non_finite;
@@ -207,8 +230,11 @@ RangeImage projectPointCloud(const PointCloudInput& cloud, const LidarModelConst
   counts.input_points = cloud.size();
 
   ImageWriter writer(cloud, image, counts);
+  // Half a column: points nearer their pixel's ray than that are in the pixel.
+  const double half_column_rad = M_PI / model->columns();
   const bool pixel_for_pixel = cloud.isOrganized() && cloud.organized_height == model->rows() &&
-                               cloud.organized_width == model->columns();
+                               cloud.organized_width == model->columns() &&
+                               organizedOffRayAngle(cloud, *model, cloud.organized_column_order) < half_column_rad;
   if (pixel_for_pixel) {
     projectOrganized(cloud, *model, writer, counts);
   } else if (!ring_to_row.empty() && !cloud.ring.empty()) {

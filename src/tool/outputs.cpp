@@ -191,12 +191,18 @@ std::string OdometryHealth::line() const {
   return text.str();
 }
 
+bool OdometryHealth::failed() const { return 2 * (degenerate_ + skipped_) > frames_; }
+
 std::string OdometryHealth::warning() const {
   if (frames_ == 0) return {};
-  if (2 * degenerate_ > frames_)
-    return std::to_string(degenerate_) + " of " + std::to_string(frames_) +
-           " scans were degenerate: the trajectory is mostly the motion prior (check the sensor model against "
-           "the data, and the scene)";
+  if (2 * skipped_ > frames_)
+    return std::to_string(skipped_) + " of " + std::to_string(frames_) +
+           " scans were skipped, their range images empty: the sensor model places none of their points (check "
+           "the model against the data: rim sensor check INPUT, or give the sensor with --sensor)";
+  if (failed())
+    return std::to_string(degenerate_) + " of " + std::to_string(frames_) + " scans were degenerate" +
+           (skipped_ ? " and " + std::to_string(skipped_) + " skipped" : std::string()) +
+           ": the trajectory is mostly the motion prior (check the sensor model against the data, and the scene)";
   if (2 * suspect_ > frames_)
     return std::to_string(suspect_) + " of " + std::to_string(frames_) +
            " scans were suspect (few pixels paired, or moving objects filling the view): check the warnings in "
@@ -207,9 +213,8 @@ std::string OdometryHealth::warning() const {
 int reportHealth(const OdometryHealth& health) {
   const std::string warning = health.warning();
   if (warning.empty()) return 0;
-  const bool failed = 2 * health.degenerate() > health.frames();
-  std::cerr << (failed ? "error: " : "warning: ") << warning << "\n";
-  return failed ? 3 : 0;
+  std::cerr << (health.failed() ? "error: " : "warning: ") << warning << "\n";
+  return health.failed() ? 3 : 0;
 }
 
 OdometryFramesCsv::OdometryFramesCsv(const std::string& path) : path_(path), file_(path) {

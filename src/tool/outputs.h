@@ -62,6 +62,8 @@ class OdometryHealth {
   void add(const registration::OdometryUpdate& update);
   int frames() const { return frames_; }
   int degenerate() const { return degenerate_; }
+  // Most scans degenerate or skipped: the trajectory is not a measurement.
+  bool failed() const;
   int resets() const { return resets_; }
   int skipped() const { return skipped_; }
   Json::Value json() const;
