@@ -3,7 +3,8 @@
 // ground truth): the static world wins the registration, the pixels the
 // odometry calls moving lie mostly on the actors (per-pixel truth labels),
 // and every figure reaches rim's summary. Without the moving-object handling
-// and the area weights the odometry follows the trucks (tens of metres off).
+// and the area weights the odometry follows the trucks (tens of metres off);
+// without the stale pixels (behind the model's surface) left out it lags them.
 #include "range_image_mapping/evaluation/trajectory_metrics.h"
 #include "range_image_mapping/io/pose_file.h"
 #include "range_image_mapping/io/recording.h"
@@ -35,8 +36,11 @@ TEST_F(MovingObjects, TheStaticWorldWinsWhileTrucksKeepPaceAlongside) {
   std::cout << "traffic, " << kFrames << " frames: ATE " << result.absolute_translation_m.rmse << " m, travelled "
             << travelled << " m, estimated " << estimated << " m\n";
   EXPECT_GT(travelled, 30.0);
-  EXPECT_NEAR(estimated, travelled, 0.03 * travelled);  // following the trucks: a few metres at most
-  EXPECT_LT(result.absolute_translation_m.rmse, 0.3);
+  // Following the trucks would be metres off; the rear of a truck pulling
+  // ahead, paired with the model's older copy of it, holds the car back by
+  // about 1 % unless such stale pixels are left out (README, moving objects).
+  EXPECT_NEAR(estimated, travelled, 0.0075 * travelled);
+  EXPECT_LT(result.absolute_translation_m.rmse, 0.13);
   // The health figures are in the summary.
   const std::string summary = test::readText(path("t/est_summary.json"));
   for (const char* key : {"mean_moving_share", "max_moving_share", "mean_inlier_share", "suspect"})

@@ -284,6 +284,8 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
   update.valid_pixels = std::size_t(std::count_if(deskewed_.normals.begin(), deskewed_.normals.end(),
                                                   [](const Eigen::Vector3f& normal) { return normal.allFinite(); }));
   moving_.assign(deskewed_.points.size(), 0);
+  stale_.assign(deskewed_.points.size(), 0);
+  if (update.degenerate) behind_model_.clear();
   if (!update.degenerate) {
     update.moving_pixels = classifyMoving(*scan.model, target_from_current);
     const double share = update.valid_pixels ? double(update.moving_pixels) / double(update.valid_pixels) : 0.0;
@@ -349,6 +351,8 @@ void LidarOdometry::restart(const RangeImage& scan, uint64_t stamp_ns) {
   computeVertexNormalMap(scan, 1, options_.registration.normals, measured_);
   deskewed_ = measured_;
   moving_.assign(measured_.points.size(), 0);
+  stale_.assign(measured_.points.size(), 0);
+  behind_model_.clear();
   model_.clear();
   addKeyframe(scan, false);
   target_pose_ = pose_;
@@ -358,17 +362,22 @@ void LidarOdometry::restart(const RangeImage& scan, uint64_t stamp_ns) {
 
 // Objects that moved in the last scan are left out of this one's source:
 // those that keep pace with the sensor (traffic alongside) stay in the same
-// pixels, others move a few; the mask is grown by kMovingGrowth pixels.
+// pixels, others move a few; the mask is grown by kMovingGrowth pixels. So are
+// the last scan's stale pixels: where a vehicle pulls ahead they are on its
+// rear, and paired with the model's older copy of it they hold the scan back.
 const VertexNormalMap& LidarOdometry::sourceWithoutMoving() {
   constexpr int kMovingGrowth = 2;
-  if (moving_.size() != measured_.points.size() ||
-      std::find(moving_.begin(), moving_.end(), uint8_t(1)) == moving_.end())
-    return measured_;
+  const std::size_t size = measured_.points.size();
+  const auto marked = [&](std::size_t i) { return moving_[i] || stale_[i]; };
+  if (moving_.size() != size || stale_.size() != size) return measured_;
+  std::size_t first = 0;
+  while (first < size && !marked(first)) ++first;
+  if (first == size) return measured_;
   source_ = measured_;
   const int rows = measured_.rows, columns = measured_.columns;
-  for (int row = 0; row < rows; ++row)
+  for (int row = int(first / std::size_t(columns)); row < rows; ++row)
     for (int column = 0; column < columns; ++column) {
-      if (!moving_[std::size_t(row) * columns + column]) continue;
+      if (!marked(std::size_t(row) * columns + column)) continue;
       for (int r = std::max(0, row - kMovingGrowth); r <= std::min(rows - 1, row + kMovingGrowth); ++r)
         for (int c = column - kMovingGrowth; c <= column + kMovingGrowth; ++c)
           source_.normals[std::size_t(r) * columns + std::size_t((c + columns) % columns)].setConstant(
@@ -378,14 +387,19 @@ const VertexNormalMap& LidarOdometry::sourceWithoutMoving() {
 }
 
 std::size_t LidarOdometry::classifyMoving(const LidarModel& model, const Eigen::Isometry3d& target_from_current) {
-  if (!(options_.moving_margin_m > 0.0) || model_.provisional()) return 0;
   const VertexNormalMap& target = icp_.targetLevel(options_.registration.strides.size() - 1);
-  if (target.stride != 1) return 0;
+  if (!(options_.moving_margin_m > 0.0) || model_.provisional() || target.stride != 1) {
+    behind_model_.clear();
+    return 0;
+  }
   const Eigen::Isometry3f transform = target_from_current.cast<float>();
   const float margin = float(options_.moving_margin_m);
+  // A stale pixel's surface faces the way the model's does: the same surface
+  // moved away, not an edge that uncovers something behind it.
+  constexpr float kStaleNormalCosine = 0.9f;
   const std::size_t size = deskewed_.points.size();
   constexpr std::size_t kChunk = 1024;
-  return tbb::parallel_reduce(
+  const std::size_t moving = tbb::parallel_reduce(
       tbb::blocked_range<std::size_t>(0, size, kChunk), std::size_t(0),
       [&](const tbb::blocked_range<std::size_t>& block, std::size_t count) {
         // Projected in chunks (projectMany): several times faster than one by one.
@@ -409,15 +423,30 @@ std::size_t LidarOdometry::classifyMoving(const LidarModel& model, const Eigen::
             const Eigen::Vector3f& normal = target.normals[t];
             if (!surface.allFinite() || !normal.allFinite()) continue;
             // Normals face the sensor: positive is in front of the surface.
-            if (normal.dot(points[k] - surface) > margin && points[k].norm() < surface.norm()) {
+            const float in_front_m = normal.dot(points[k] - surface);
+            const bool nearer = points[k].norm() < surface.norm();
+            if (in_front_m > margin && nearer) {
               moving_[pixel_of[k]] = 1;
               ++count;
+            } else if (-in_front_m > margin && !nearer &&
+                       normal.dot(transform.linear() * deskewed_.normals[pixel_of[k]]) > kStaleNormalCosine) {
+              stale_[pixel_of[k]] = 1;  // behind the model; stale if it was in the last scan too (below)
             }
           }
         }
         return count;
       },
       std::plus<>());
+  // Stale only when behind the model in this scan and the last one at the
+  // same pixel: a vehicle pulling ahead stays in its pixels, while the
+  // uncovered edges of static objects move across the image with the sensor.
+  if (behind_model_.size() != size) behind_model_.assign(size, 0);
+  for (std::size_t i = 0; i < size; ++i) {
+    const uint8_t behind = stale_[i];
+    stale_[i] = behind && behind_model_[i];
+    behind_model_[i] = behind;
+  }
+  return moving;
 }
 
 // The scan's pyramid, each level's normals at its own stride (the paper's

@@ -62,7 +62,11 @@ struct OdometryOptions {
   // sensor: in space the keyframes saw empty) is moving. Moving pixels are
   // left out of keyframes, so the model (and the map, through the pipeline)
   // keeps the static world; a scan with more than moving_warning_share of
-  // its pixels moving is reported. 0: no classification.
+  // its pixels moving is reported. A pixel this far behind the model's
+  // surface, facing the same way, in this scan and the last, is stale: the
+  // surface the keyframes saw there has moved away (the rear of a vehicle
+  // pulling ahead); it is left out of the next registration only (what it
+  // sees may be the static world uncovered). 0: no classification.
   double moving_margin_m = 0.3;
   double moving_warning_share = 0.3;
   // A registration that pairs fewer than this share of the scan's pixels
@@ -159,8 +163,8 @@ class LidarOdometry {
   std::string physicalLimitBroken(const Twist& twist, double dt_s) const;
   void moveColumns(const VertexNormalMap& measured, VertexNormalMap& moved) const;
   bool provisional(const RangeImage& scan) const;
-  // Marks moving_ from deskewed_ registered at target_from_current against
-  // the rendered model; returns how many.
+  // Marks moving_ and stale_ from deskewed_ registered at target_from_current
+  // against the rendered model; returns how many are moving.
   std::size_t classifyMoving(const LidarModel& model, const Eigen::Isometry3d& target_from_current);
   void addKeyframe(const RangeImage& scan, bool deskewed);
 
@@ -179,7 +183,9 @@ class LidarOdometry {
   std::vector<VertexNormalMap> rendered_;  // the model's levels at the predicted pose
   std::vector<VertexNormalMap> keyframe_levels_;
   std::vector<uint8_t> moving_;
-  VertexNormalMap source_;  // measured_ without the last scan's moving pixels
+  std::vector<uint8_t> stale_;  // behind the model's surface now and in the last scan (see moving_margin_m)
+  std::vector<uint8_t> behind_model_;  // the last classified scan's pixels behind the model's surface
+  VertexNormalMap source_;  // measured_ without the last scan's moving and stale pixels
   const VertexNormalMap& sourceWithoutMoving();
   RangeImage staggered_;  // destaggered input, re-staggered
 };
