@@ -335,10 +335,12 @@ class BlockMesher {
 // faces across that axis, or in a +1 neighbour.
 bool mayBeShared(const MeshChunk& chunk, const LatticeEdge& name) {
   const int edge = chunk.block_edge;
-  if (edge <= 0 || name.block != chunk.key) return true;
+  // Block edges are 8 or 16 voxels (VoxelBlockGridOptions::validate): shifts, not divisions.
+  if ((edge != 8 && edge != 16) || name.block != chunk.key) return true;
   if (name.index >= 3 * edge * edge * edge) return false;  // a cube's interior vertex
+  const int bits = edge == 8 ? 3 : 4, mask = edge - 1;
   const int axis = name.index % 3, voxel = name.index / 3;
-  const int lower[3] = {voxel % edge, (voxel / edge) % edge, voxel / (edge * edge)};
+  const int lower[3] = {voxel & mask, (voxel >> bits) & mask, voxel >> (2 * bits)};
   for (int other = 0; other < 3; ++other)
     if (other != axis && lower[other] == 0) return true;
   return false;

@@ -340,6 +340,15 @@ int columnSeenFromMovingSensor(const LidarModel& model, const SweepMotion& motio
   return column;
 }
 
+// The rows from the lowest beam to the highest.
+std::vector<int> rowsByAltitude(const LidarIntrinsics& intrinsics) {
+  std::vector<int> by_altitude(intrinsics.rows);
+  for (int v = 0; v < intrinsics.rows; ++v) by_altitude[v] = v;
+  std::sort(by_altitude.begin(), by_altitude.end(),
+            [&](int a, int b) { return intrinsics.altitude_rad[a] < intrinsics.altitude_rad[b]; });
+  return by_altitude;
+}
+
 void computeRefinementCull(const LidarModel& model, const RangeImage& scan, const PixelPlane* planes,
                            float truncation, float min_range, float max_range, const Twist& twist,
                            RefinementCull& cull) {
@@ -349,10 +358,7 @@ void computeRefinementCull(const LidarModel& model, const RangeImage& scan, cons
   cull.turn_rate = float(twist.head<3>().norm());
   cull.columns_per_radian = float(columns / (2.0 * M_PI));
   cull.beam_origin_radius = float(std::hypot(intrinsics.beam_origin_radius_m, intrinsics.beam_origin_z_m));
-  std::vector<int> by_altitude(rows);
-  for (int v = 0; v < rows; ++v) by_altitude[v] = v;
-  std::sort(by_altitude.begin(), by_altitude.end(),
-            [&](int a, int b) { return intrinsics.altitude_rad[a] < intrinsics.altitude_rad[b]; });
+  const std::vector<int> by_altitude = rowsByAltitude(intrinsics);
   cull.smallest_altitude_gap = std::numeric_limits<float>::infinity();
   for (int rank = 0; rank + 1 < rows; ++rank)
     cull.smallest_altitude_gap =
@@ -472,10 +478,13 @@ std::size_t projectIntoMovingSensor(const LidarModel& model, const SweepMotion& 
                                     std::abs(motion.time[after] - centre_time)) + motion.tolerance_s;
         const Eigen::Vector3f& point = buffers.moved_points[i];
         const float horizontal = std::sqrt(point.x() * point.x() + point.y() * point.y());
+        // The point moves by at most `moved` plus `turned` times its distance
+        // from the lidar origin; angles are seen from the beam origin, r0 off it.
         const float moved = cull->speed_mps * time, turned = cull->turn_rate * time;
-        const float azimuth_change = turned + moved / std::max(horizontal - cull->beam_origin_radius, 1e-3f);
-        const float altitude_change = turned + moved / std::max(pixel.range - cull->beam_origin_radius, 1e-3f);
-        const float range_change = moved + turned * cull->beam_origin_radius + 1e-3f;
+        const float shift = moved + turned * cull->beam_origin_radius;
+        const float azimuth_change = turned + shift / std::max(horizontal - cull->beam_origin_radius, 1e-3f);
+        const float altitude_change = turned + shift / std::max(pixel.range - cull->beam_origin_radius, 1e-3f);
+        const float range_change = shift + 1e-3f;
         if (cull->timed[before] && cull->timed[after] && cull->timed[centre_column] &&
             azimuth_change * cull->columns_per_radian < kFarColumnShift &&
             altitude_change < cull->smallest_altitude_gap && pixel.range - range_change > far_limit) {
@@ -519,9 +528,7 @@ std::size_t projectIntoMovingSensor(const LidarModel& model, const SweepMotion& 
 void computePixelAngles(const LidarModel& model, std::vector<float>& angle) {
   const std::vector<double>& altitude = model.intrinsics().altitude_rad;
   const int rows = model.rows();
-  std::vector<int> by_altitude(rows);
-  for (int v = 0; v < rows; ++v) by_altitude[v] = v;
-  std::sort(by_altitude.begin(), by_altitude.end(), [&](int a, int b) { return altitude[a] < altitude[b]; });
+  const std::vector<int> by_altitude = rowsByAltitude(model.intrinsics());
   const double column_angle = 2.0 * M_PI / model.columns();
   angle.assign(rows, float(column_angle));
   for (int rank = 0; rank < rows; ++rank) {
