@@ -210,6 +210,7 @@ struct RefinementCull {
   // stagger to the rows next in altitude: the motion used spans these.
   int column_reach = 0;
   std::vector<uint8_t> timed;  // per column: in the sensor's column window (has a time)
+  std::vector<float> own, in_row;  // per pixel: its own bound, the row's dilation (reused between scans)
 };
 
 // Columns a voxel's pixel may move under refinement and still be covered by
@@ -367,7 +368,10 @@ void computeRefinementCull(const LidarModel& model, const RangeImage& scan, cons
   // The bound of each pixel, then its maximum over kFarColumns + 1 columns on
   // either side (wrapping) in its row.
   constexpr float kNone = -std::numeric_limits<float>::infinity();
-  std::vector<float> own(std::size_t(rows) * columns), in_row(own.size());
+  std::vector<float>& own = cull.own;
+  std::vector<float>& in_row = cull.in_row;
+  own.resize(std::size_t(rows) * columns);
+  in_row.resize(own.size());
   tbb::parallel_for(0, rows, [&](int v) {
     for (int u = 0; u < columns; ++u) {
       const std::size_t i = scan.index(v, u);
