@@ -53,6 +53,7 @@ class BlockMesher {
   MeshChunk mesh(const VoxelBlockGrid& grid, const VoxelBlock& block, const MeshOptions& options) {
     MeshChunk chunk;
     chunk.key = block.key;
+    chunk.block_edge = grid.blockEdge();
     if (!load(grid, block, options)) return chunk;
     const MarchingCubesCases& cases = MarchingCubesCases::instance();
     std::array<int, 8> corner_offset;
@@ -328,6 +329,23 @@ class BlockMesher {
   std::vector<int> loop_vertices_;
 };
 
+// Whether another chunk's cubes may cut the lattice edge a vertex of this
+// chunk is named after: the four cubes around an edge along `axis` lie in the
+// chunk's block unless the edge's lower end is on one of the block's lower
+// faces across that axis, or in a +1 neighbour.
+bool mayBeShared(const MeshChunk& chunk, const LatticeEdge& name) {
+  const int edge = chunk.block_edge;
+  // Block edges are 8 or 16 voxels (VoxelBlockGridOptions::validate): shifts, not divisions.
+  if ((edge != 8 && edge != 16) || name.block != chunk.key) return true;
+  if (name.index >= 3 * edge * edge * edge) return false;  // a cube's interior vertex
+  const int bits = edge == 8 ? 3 : 4, mask = edge - 1;
+  const int axis = name.index % 3, voxel = name.index / 3;
+  const int lower[3] = {voxel & mask, (voxel >> bits) & mask, voxel >> (2 * bits)};
+  for (int other = 0; other < 3; ++other)
+    if (other != axis && lower[other] == 0) return true;
+  return false;
+}
+
 // One mesh from chunks in the given order; the first chunk that cut a
 // lattice edge provides its vertex.
 TriangleMesh weldChunks(const std::vector<const MeshChunk*>& chunks) {
@@ -349,7 +367,7 @@ TriangleMesh weldChunks(const std::vector<const MeshChunk*>& chunks) {
   mesh.triangles.reserve(triangle_count);
 
   tsl::robin_map<LatticeEdge, int, LatticeEdgeHash> vertex_of_edge;
-  vertex_of_edge.reserve(vertex_count);
+  vertex_of_edge.reserve(vertex_count / 2);  // about the share of vertices on block faces
   std::vector<int> remap;
   for (const MeshChunk* chunk : chunks) {
     if (chunk->vertex_edges.size() != chunk->vertices.size() ||
@@ -358,10 +376,15 @@ TriangleMesh weldChunks(const std::vector<const MeshChunk*>& chunks) {
                          " has vertices, normals and lattice edges of different counts");
     remap.resize(chunk->vertices.size());
     for (std::size_t v = 0; v < chunk->vertices.size(); ++v) {
-      const auto [found, inserted] =
-          vertex_of_edge.try_emplace(chunk->vertex_edges[v], int(mesh.vertices.size()));
-      remap[v] = found->second;
-      if (!inserted) continue;
+      // Only edges on a block's faces are cut by two chunks: the others skip the hash map.
+      if (mayBeShared(*chunk, chunk->vertex_edges[v])) {
+        const auto [found, inserted] =
+            vertex_of_edge.try_emplace(chunk->vertex_edges[v], int(mesh.vertices.size()));
+        remap[v] = found->second;
+        if (!inserted) continue;
+      } else {
+        remap[v] = int(mesh.vertices.size());
+      }
       mesh.vertices.push_back(chunk->vertices[v]);
       mesh.normals.push_back(chunk->normals[v]);
       if (with_intensity) mesh.intensities.push_back(chunk->intensities[v]);

@@ -188,6 +188,37 @@ struct BlockBuffers {
   }
 };
 
+// Which voxels the motion refinement may leave out: those that no pixel near
+// the one their first projection hit could write. A voxel is written only in
+// front of its pixel's return plus max(reach, truncation) (the plane's reach
+// for point-to-plane distances, the truncation along the ray), and never by
+// a pixel without a return in the clip; refining the motion moves a voxel
+// by the sensor's motion between two columns, so its pixel by a few columns
+// at most and its range by speed * time. far_limit holds, per pixel, the
+// largest such bound over the pixels within kFarColumns columns in its row
+// and in the rows next to it in altitude (at the same azimuth): a voxel
+// beyond it, by more than its range can change, stays unwritten whatever
+// pixel refinement gives it. Exact: leaving these voxels out changes no
+// voxel of the grid (tsdf_integrator_test's culling test).
+struct RefinementCull {
+  std::vector<float> far_limit;  // per pixel; -inf where no pixel nearby can write
+  float speed_mps = 0.0f, turn_rate = 0.0f;
+  float columns_per_radian = 0.0f;
+  float smallest_altitude_gap = 0.0f;  // radians between rows next in altitude
+  float beam_origin_radius = 0.0f;
+  // Columns (measurement ids) the pixel may move by, its own row's and the
+  // stagger to the rows next in altitude: the motion used spans these.
+  int column_reach = 0;
+  std::vector<uint8_t> timed;  // per column: in the sensor's column window (has a time)
+  std::vector<float> own, in_row;  // per pixel: its own bound, the row's dilation (reused between scans)
+};
+
+// Columns a voxel's pixel may move under refinement and still be covered by
+// far_limit: the image is dilated by one more, for the rounding of the
+// stagger between rows.
+constexpr int kFarColumns = 3;
+constexpr float kFarColumnShift = float(kFarColumns - 1);
+
 void requireFiniteOption(double value, const char* field) {
   if (!std::isfinite(value)) throw MappingError(std::string(field) + " must be finite, got " + numberText(value));
 }
@@ -240,6 +271,7 @@ struct TsdfIntegrator::Workspace {
   std::vector<uint32_t> integration_order; // touched blocks by azimuth
   std::vector<float> azimuth;              // per touched block, in the lidar frame
   std::vector<uint32_t> voxels_updated;    // per touched block
+  std::vector<uint32_t> voxels_not_refined;  // per touched block
   std::vector<float> block_drift;          // per touched block: largest |sdf change| of a voxel
   std::vector<uint8_t> block_topology;     // per touched block: a voxel's sign or observation changed
   std::vector<ColumnMotion> column_motion_inverse;  // scan-time frame -> column-time frame
@@ -249,6 +281,7 @@ struct TsdfIntegrator::Workspace {
   std::vector<PixelPlane> pixel_planes;    // point-to-plane
   std::vector<uint8_t> near_seam;          // per column: no plane (moving sweeps)
   std::vector<float> pixel_angle;          // per row: the larger of its row and column spacing, radians
+  RefinementCull refinement_cull;          // moving sweeps
 };
 
 struct TsdfIntegrator::DriftSinceMarked {
@@ -308,6 +341,97 @@ int columnSeenFromMovingSensor(const LidarModel& model, const SweepMotion& motio
   return column;
 }
 
+// The rows from the lowest beam to the highest.
+std::vector<int> rowsByAltitude(const LidarIntrinsics& intrinsics) {
+  std::vector<int> by_altitude(intrinsics.rows);
+  for (int v = 0; v < intrinsics.rows; ++v) by_altitude[v] = v;
+  std::sort(by_altitude.begin(), by_altitude.end(),
+            [&](int a, int b) { return intrinsics.altitude_rad[a] < intrinsics.altitude_rad[b]; });
+  return by_altitude;
+}
+
+void computeRefinementCull(const LidarModel& model, const RangeImage& scan, const PixelPlane* planes,
+                           float truncation, float min_range, float max_range, const Twist& twist,
+                           RefinementCull& cull) {
+  const int rows = scan.rows(), columns = scan.columns();
+  const LidarIntrinsics& intrinsics = model.intrinsics();
+  cull.speed_mps = float(twist.tail<3>().norm());
+  cull.turn_rate = float(twist.head<3>().norm());
+  cull.columns_per_radian = float(columns / (2.0 * M_PI));
+  cull.beam_origin_radius = float(std::hypot(intrinsics.beam_origin_radius_m, intrinsics.beam_origin_z_m));
+  const std::vector<int> by_altitude = rowsByAltitude(intrinsics);
+  cull.smallest_altitude_gap = std::numeric_limits<float>::infinity();
+  for (int rank = 0; rank + 1 < rows; ++rank)
+    cull.smallest_altitude_gap =
+        std::min(cull.smallest_altitude_gap, float(intrinsics.altitude_rad[by_altitude[rank + 1]] -
+                                                   intrinsics.altitude_rad[by_altitude[rank]]));
+  // The bound of each pixel, then its maximum over kFarColumns + 1 columns on
+  // either side (wrapping) in its row.
+  constexpr float kNone = -std::numeric_limits<float>::infinity();
+  std::vector<float>& own = cull.own;
+  std::vector<float>& in_row = cull.in_row;
+  own.resize(std::size_t(rows) * columns);
+  in_row.resize(own.size());
+  tbb::parallel_for(0, rows, [&](int v) {
+    for (int u = 0; u < columns; ++u) {
+      const std::size_t i = scan.index(v, u);
+      const float range = scan.range[i];
+      if (!(range >= min_range && range <= max_range)) {  // also NaN
+        own[i] = kNone;
+        continue;
+      }
+      const float reach = planes ? planes[i].reach : truncation;
+      own[i] = range + (std::isfinite(reach) ? std::max(reach, truncation) : truncation);
+    }
+    // The row with its ends wrapped around, so the window needs no modulo.
+    constexpr int kRadius = kFarColumns + 1;
+    float wrapped[2 * kRadius + 1];
+    const float* row = own.data() + scan.index(v, 0);
+    float* out = in_row.data() + scan.index(v, 0);
+    for (int u = 0; u < columns; ++u) {
+      float largest = kNone;
+      if (u >= kRadius && u + kRadius < columns) {
+        for (int d = -kRadius; d <= kRadius; ++d) largest = std::max(largest, row[u + d]);
+      } else {
+        for (int d = -kRadius; d <= kRadius; ++d) wrapped[d + kRadius] = row[((u + d) % columns + columns) % columns];
+        for (float value : wrapped) largest = std::max(largest, value);
+      }
+      out[u] = largest;
+    }
+  });
+  // And over the rows next in altitude, at the column of the same azimuth.
+  std::vector<int> rank_of(rows);
+  for (int rank = 0; rank < rows; ++rank) rank_of[by_altitude[rank]] = rank;
+  cull.far_limit.resize(own.size());
+  cull.column_reach = kFarColumns;
+  for (int v = 0; v < rows; ++v) {
+    const int rank = rank_of[v];
+    for (int other_rank = std::max(rank - 1, 0); other_rank <= std::min(rank + 1, rows - 1); ++other_rank) {
+      const double shift = (intrinsics.azimuth_offset_rad[by_altitude[other_rank]] - intrinsics.azimuth_offset_rad[v]) *
+                           cull.columns_per_radian;
+      cull.column_reach = std::max(cull.column_reach, kFarColumns + int(std::ceil(std::abs(shift))) + 1);
+    }
+  }
+  cull.timed.resize(columns);
+  for (int u = 0; u < columns; ++u) cull.timed[u] = intrinsics.columnInWindow(u);
+  tbb::parallel_for(0, rows, [&](int v) {
+    const int rank = rank_of[v];
+    for (int u = 0; u < columns; ++u) cull.far_limit[scan.index(v, u)] = in_row[scan.index(v, u)];
+    for (int other_rank = rank - 1; other_rank <= rank + 1; other_rank += 2) {
+      if (other_rank < 0 || other_rank >= rows) continue;
+      const int other = by_altitude[other_rank];
+      // Pi's column of one azimuth moves with the row's azimuth offset (theta_lut).
+      const int shift = int(std::lround((intrinsics.azimuth_offset_rad[other] - intrinsics.azimuth_offset_rad[v]) *
+                                        cull.columns_per_radian));
+      const int start = ((shift % columns) + columns) % columns;
+      const float* other_row = in_row.data() + scan.index(other, 0);
+      float* limits = cull.far_limit.data() + scan.index(v, 0);
+      for (int u = 0, w = start; u < columns; ++u, w = w + 1 == columns ? 0 : w + 1)
+        limits[u] = std::max(limits[u], other_row[w]);
+    }
+  });
+}
+
 // Pi of a block's voxels into the moving sensor: each voxel as the sensor
 // saw it when the column that measured it fired (the fixed point above, for
 // every voxel). All voxels are first projected as the block centre's column
@@ -318,12 +442,14 @@ int columnSeenFromMovingSensor(const LidarModel& model, const SweepMotion& motio
 // settle lie where the sweep's start and end overlap or leave a gap (the
 // seam): they miss this scan rather than being averaged with the wrong
 // sensor position.
-void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion, const Eigen::Vector3f& first,
-                             const Eigen::Matrix3f& lattice_steps, int edge, BlockBuffers& buffers) {
+// Returns how many voxels the cull left out of the refinement.
+std::size_t projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion, const RefinementCull* cull,
+                                    const Eigen::Vector3f& first, const Eigen::Matrix3f& lattice_steps, int edge,
+                                    BlockBuffers& buffers) {
   const std::size_t voxels = std::size_t(edge) * edge * edge;
   const Eigen::Vector3f block_centre = first + lattice_steps * Eigen::Vector3f::Constant(0.5f * float(edge - 1));
   const int centre_column = columnSeenFromMovingSensor(model, motion, block_centre);
-  std::size_t pending = 0;
+  std::size_t pending = 0, not_refined = 0;
   if (centre_column >= 0) {
     // The block's lattice in the centre column's frame, built as the voxels' (buffers.points).
     const Eigen::Vector3f moved_first = motion.toColumnFrame(centre_column, first);
@@ -335,12 +461,43 @@ void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion,
         for (int x = 0; x < edge; ++x) buffers.moved_points[i++] = row_start + moved_steps.col(0) * float(x);
       }
     model.projectMany(buffers.moved_points.data(), voxels, buffers.pixels.data(), buffers.hits.data());
+    const int columns = model.columns();
     for (i = 0; i < voxels; ++i) {
       // A miss here is a voxel off the vertical field of view by more than
       // the sensor moved between the two columns: it is left out.
       if (!buffers.hits[i]) continue;
       buffers.frame_points[i] = buffers.moved_points[i];
-      if (!motion.settled(centre_column, buffers.pixels[i].column)) buffers.pending[pending++] = uint32_t(i);
+      const ProjectedPixel& pixel = buffers.pixels[i];
+      if (motion.settled(centre_column, pixel.column)) continue;
+      const float far_limit = cull ? cull->far_limit[std::size_t(pixel.row) * columns + pixel.column] : 0.0f;
+      if (cull && pixel.range > far_limit) {  // most voxels stop at this look
+        // The motion between the centre's column and any column the voxel's
+        // pixel can move to (a time jump at the seam makes this large);
+        // settled means within the tolerance of the motion used.
+        int before = pixel.column - cull->column_reach, after = pixel.column + cull->column_reach;
+        before += before < 0 ? columns : 0;
+        after -= after >= columns ? columns : 0;
+        const float centre_time = motion.time[centre_column];
+        const float time = std::max(std::abs(motion.time[before] - centre_time),
+                                    std::abs(motion.time[after] - centre_time)) + motion.tolerance_s;
+        const Eigen::Vector3f& point = buffers.moved_points[i];
+        const float horizontal = std::sqrt(point.x() * point.x() + point.y() * point.y());
+        // The point moves by at most `moved` plus `turned` times its distance
+        // from the lidar origin; angles are seen from the beam origin, r0 off it.
+        const float moved = cull->speed_mps * time, turned = cull->turn_rate * time;
+        const float shift = moved + turned * cull->beam_origin_radius;
+        const float azimuth_change = turned + shift / std::max(horizontal - cull->beam_origin_radius, 1e-3f);
+        const float altitude_change = turned + shift / std::max(pixel.range - cull->beam_origin_radius, 1e-3f);
+        const float range_change = shift + 1e-3f;
+        if (cull->timed[before] && cull->timed[after] && cull->timed[centre_column] &&
+            azimuth_change * cull->columns_per_radian < kFarColumnShift &&
+            altitude_change < cull->smallest_altitude_gap && pixel.range - range_change > far_limit) {
+          buffers.hits[i] = 0;  // beyond what any pixel it can move to writes
+          ++not_refined;
+          continue;
+        }
+      }
+      buffers.pending[pending++] = uint32_t(i);
     }
   } else {  // the centre is outside the field of view: start from the scan-time projection
     model.projectMany(buffers.points.data(), voxels, buffers.pixels.data(), buffers.hits.data());
@@ -367,6 +524,7 @@ void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion,
     pending = unsettled;
   }
   for (std::size_t n = 0; n < pending; ++n) buffers.hits[buffers.pending[n]] = 0;
+  return not_refined;
 }
 
 // Per row, the angle between neighbouring pixels: the larger of the column
@@ -374,9 +532,7 @@ void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion,
 void computePixelAngles(const LidarModel& model, std::vector<float>& angle) {
   const std::vector<double>& altitude = model.intrinsics().altitude_rad;
   const int rows = model.rows();
-  std::vector<int> by_altitude(rows);
-  for (int v = 0; v < rows; ++v) by_altitude[v] = v;
-  std::sort(by_altitude.begin(), by_altitude.end(), [&](int a, int b) { return altitude[a] < altitude[b]; });
+  const std::vector<int> by_altitude = rowsByAltitude(model.intrinsics());
   const double column_angle = 2.0 * M_PI / model.columns();
   angle.assign(rows, float(column_angle));
   for (int rank = 0; rank < rows; ++rank) {
@@ -664,7 +820,15 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
   const bool with_intensity = grid.options().store_intensity && scan.intensity.size() == scan.range.size();
   const VoxelUpdate voxel_update{options_.max_weight, adding};
   const SweepMotion sweep_motion{work.column_motion_inverse, work.column_time, time_tolerance_s};
+  const RefinementCull* cull = nullptr;
+  if (moving && options_.skip_unreachable_voxels) {
+    computeRefinementCull(model, scan, point_to_plane ? work.pixel_planes.data() : nullptr, truncation, min_range,
+                          max_range, pose.twist, work.refinement_cull);
+    // (A sensor with so few columns that the window wraps around is not culled.)
+    if (4 * work.refinement_cull.column_reach < columns) cull = &work.refinement_cull;
+  }
   work.voxels_updated.assign(touched_blocks_.size(), 0);
+  work.voxels_not_refined.assign(touched_blocks_.size(), 0);
   work.block_drift.assign(touched_blocks_.size(), 0.0f);
   work.block_topology.assign(touched_blocks_.size(), 0);
   const float mesh_min_weight = options_.mesh_min_weight;
@@ -708,7 +872,7 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
           for (int i = 0; i < edge; ++i) buffers.points[n++] = row_start + lattice_steps.col(0) * float(i);
         }
       if (moving) {
-        projectIntoMovingSensor(model, sweep_motion, first, lattice_steps, edge, buffers);
+        work.voxels_not_refined[b] = projectIntoMovingSensor(model, sweep_motion, cull, first, lattice_steps, edge, buffers);
       } else {
         model.projectMany(buffers.points.data(), voxels, buffers.pixels.data(), buffers.hits.data());
       }
@@ -802,6 +966,7 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
   for (std::size_t b = 0; b < touched_blocks_.size(); ++b) {
     VoxelBlock& block = *touched_blocks_[b];
     statistics.voxels_updated += work.voxels_updated[b];
+    statistics.voxels_not_refined += work.voxels_not_refined[b];
     const bool may_be_empty = work.created[b] || !adding;
     if (may_be_empty &&
         std::none_of(block.weight.begin(), block.weight.end(), [](float w) { return w > 0.0f; })) {

@@ -72,6 +72,10 @@ struct MeshChunk {
   std::vector<float> intensities;          // per vertex when the grid stores intensity
   std::vector<Eigen::Vector3i> triangles;  // indices into vertices
   std::vector<LatticeEdge> vertex_edges;   // each vertex's name, for welding chunks
+  // The grid's block edge (voxels); with it welding looks up only the
+  // vertices another chunk can share (those on the block's lower faces or
+  // named after a +1 neighbour). 0: every vertex is looked up by name.
+  int block_edge = 0;
 };
 
 // Meshes one block (cubes whose lower corner is in the block, reading the +1
