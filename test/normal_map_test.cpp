@@ -239,7 +239,8 @@ TEST(NormalMap, RealScanWithEmptyNeighbourColumnsKeepsItsNormals) {
 // levelPixelIndex shifts for power-of-two strides and divides otherwise;
 // both must give the nearest level pixel of the plain formula, for every
 // full-resolution pixel, including the last rows (clamped) and the columns
-// that round up to column W (wrapped to 0).
+// that round up to column W (wrapped to 0). LevelPixelTables, its tabulated
+// form, must give the same.
 TEST(LevelPixelIndex, NearestLevelPixelForEveryStride) {
   constexpr int kRows = 128, kColumns = 1024;
   for (int stride = 1; stride <= 16; ++stride) {
@@ -247,6 +248,8 @@ TEST(LevelPixelIndex, NearestLevelPixelForEveryStride) {
     level.stride = stride;
     level.rows = (kRows + stride - 1) / stride;
     level.columns = (kColumns + stride - 1) / stride;
+    LevelPixelTables tables;
+    tables.build(level, kRows, kColumns);
     for (int row = 0; row < kRows; ++row) {
       for (int column = 0; column < kColumns; ++column) {
         ProjectedPixel pixel;
@@ -257,6 +260,8 @@ TEST(LevelPixelIndex, NearestLevelPixelForEveryStride) {
         if (expected_column >= level.columns) expected_column = 0;
         ASSERT_EQ(levelPixelIndex(level, pixel), std::size_t(expected_row) * level.columns + expected_column)
             << "stride " << stride << " pixel (" << row << ", " << column << ")";
+        ASSERT_EQ(tables.index(pixel), std::size_t(expected_row) * level.columns + expected_column)
+            << "tables, stride " << stride << " pixel (" << row << ", " << column << ")";
       }
     }
   }

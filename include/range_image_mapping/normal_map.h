@@ -56,6 +56,24 @@ inline std::size_t levelPixelIndex(const VertexNormalMap& level, const Projected
   return std::size_t(row) * level.columns + column;
 }
 
+// levelPixelIndex of one level tabulated for a full_rows x full_columns
+// image, as the sum of a part per full-resolution row (its level row's first
+// pixel) and one per column (its level column): the loops that file every
+// point of a scan add two looked-up integers instead of shifting and clamping.
+struct LevelPixelTables {
+  std::vector<int> row_start, column;
+  void build(const VertexNormalMap& level, int full_rows, int full_columns) {
+    row_start.resize(std::size_t(full_rows));
+    column.resize(std::size_t(full_columns));
+    for (int r = 0; r < full_rows; ++r) row_start[r] = int(levelPixelIndex(level, ProjectedPixel{0, r}));
+    for (int c = 0; c < full_columns; ++c) column[c] = int(levelPixelIndex(level, ProjectedPixel{c, 0}));
+  }
+  // For a pixel inside the full-resolution image.
+  std::size_t index(const ProjectedPixel& pixel) const {
+    return std::size_t(row_start[std::size_t(pixel.row)] + column[std::size_t(pixel.column)]);
+  }
+};
+
 // Reuses out's buffers. The image must be staggered; throws
 // std::invalid_argument for a missing model, wrong sizes, a destaggered image,
 // stride < 1 or bad options. Parallel over rows (TBB).

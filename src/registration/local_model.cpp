@@ -117,6 +117,11 @@ void LocalModel::render(const LidarModel& model, const Eigen::Isometry3d& odom_f
     if (first_point_.back() >= kNoPoint) throw std::length_error("local model: too many points to render");
     pixel_of_point_.resize(first_point_.back());
     range_of_point_.resize(first_point_.back());
+    pixel_tables_.build(level, model.rows(), model.columns());
+    // The keyframes' points of this level in the same order (a deque's
+    // indexing costs more than the transform in the per-pixel loop below).
+    level_points_.resize(keyframes_.size());
+    for (std::size_t k = 0; k < keyframes_.size(); ++k) level_points_[k] = &keyframe(k).levels[l];
 
     // Pass 1: every point's pixel and range, and each pixel's nearest range.
     for (std::size_t k = 0; k < keyframes_.size(); ++k) {
@@ -137,7 +142,7 @@ void LocalModel::render(const LidarModel& model, const Eigen::Isometry3d& odom_f
                               pixel_of_point_[number] = kNoPoint;
                               continue;
                             }
-                            const uint32_t pixel = uint32_t(levelPixelIndex(level, pixels[i]));
+                            const uint32_t pixel = uint32_t(pixel_tables_.index(pixels[i]));
                             pixel_of_point_[number] = pixel;
                             range_of_point_[number] = pixels[i].range;
                             keepSmallest(nearest[pixel], rangeBits(pixels[i].range));
@@ -174,7 +179,7 @@ void LocalModel::render(const LidarModel& model, const Eigen::Isometry3d& odom_f
         }
         std::size_t k = 0;
         while (number >= first_point_[k + 1]) ++k;
-        const Level& points = keyframe(k).levels[l];
+        const Level& points = *level_points_[k];
         const std::size_t i = number - first_point_[k];
         level.points[p] = view_from_keyframe_[k] * points.points[i];
         level.normals[p] = view_from_keyframe_[k].linear() * points.normals[i];

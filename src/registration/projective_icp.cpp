@@ -395,15 +395,8 @@ void ProjectiveIcp::setTarget(const LidarModelConstPtr& model, std::vector<Verte
 
 void ProjectiveIcp::setTargetModel(const LidarModelConstPtr& model) {
   target_index_tables_.resize(target_levels_.size());
-  for (std::size_t level = 0; level < target_levels_.size(); ++level) {
-    LevelIndexTables& tables = target_index_tables_[level];
-    tables.row_start.resize(std::size_t(model->rows()));
-    tables.column.resize(std::size_t(model->columns()));
-    for (int row = 0; row < model->rows(); ++row)
-      tables.row_start[row] = int(levelPixelIndex(target_levels_[level], ProjectedPixel{0, row}));
-    for (int column = 0; column < model->columns(); ++column)
-      tables.column[column] = int(levelPixelIndex(target_levels_[level], ProjectedPixel{column, 0}));
-  }
+  for (std::size_t level = 0; level < target_levels_.size(); ++level)
+    target_index_tables_[level].build(target_levels_[level], model->rows(), model->columns());
   target_model_ = model;
 }
 

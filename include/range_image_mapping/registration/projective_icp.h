@@ -144,18 +144,12 @@ class ProjectiveIcp {
     std::vector<int> columns;
   };
   void prepareSource(const VertexNormalMap& source) const;
-  // Per target level, levelPixelIndex split into a part per full-resolution
-  // row (its level row's first pixel) and one per column (its level
-  // column), so that association adds two looked-up integers.
-  struct LevelIndexTables {
-    std::vector<int> row_start, column;
-  };
   void setTargetModel(const LidarModelConstPtr& model);
 
   RegistrationOptions options_;
   LidarModelConstPtr target_model_;
   std::vector<VertexNormalMap> target_levels_;  // one per options_.strides entry
-  std::vector<LevelIndexTables> target_index_tables_;  // one per options_.strides entry
+  std::vector<LevelPixelTables> target_index_tables_;  // one per options_.strides entry
   // Reused between calls (no per-frame allocation in steady state).
   mutable VertexNormalMap source_map_;
   mutable std::vector<SourceLevel> source_levels_;  // one per options_.strides entry
