@@ -67,8 +67,8 @@ struct ProjectionStatistics {
 };
 
 // An organized cloud of the model's H x W read in column order `order`: the
-// median angle (rad) between a sample of its points (every 7th column of
-// every row) and their pixels' rays; NaN for other shapes or under 100
+// median angle (rad) between a sample of its points (about 4000, spread over
+// rows and columns) and their pixels' rays; NaN for other shapes or under 100
 // measured points in the sample. Near 0 when the cloud's pixels are the
 // model's; about pi when, e.g., the clouds are in a frame turned half a turn
 // from the model's (ouster-ros's os_sensor against a model of os_lidar).

@@ -26,6 +26,8 @@ class ReceiveTimeStamps {
   // scan's stamp on the sensor's clock. A receipt a second or more behind the
   // previous stamp is ROS time going back (a bag loop): taken as it is.
   Stamp next(int64_t receipt_ns, int64_t sensor_ns);
+  // A new sensor setting (metadata): the sequence goes on with another period.
+  void setNominalPeriod(int64_t nominal_period_ns);
   // ROS time jumped back: the next receipt starts a new sequence.
   void restart() { has_previous_ = false; }
   std::size_t repaired() const { return repaired_; }

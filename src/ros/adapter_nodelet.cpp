@@ -203,7 +203,7 @@ class AdapterNodelet : public nodelet::Nodelet {
   ros::Time current_frame_receipt_, previous_frame_receipt_;
   // Receive-time stamps kept increasing where ROS time stood still.
   std::optional<ReceiveTimeStamps> receive_stamps_;
-  std::size_t restamped_scans_ = 0, logged_restamped_scans_ = 0;
+  std::size_t logged_restamped_scans_ = 0;
   bool revolution_in_progress_ = false;
   ros::SteadyTime last_packet_time_;
   ros::Time last_receipt_;  // to notice ROS time jumping back (a bag loop)
@@ -324,7 +324,12 @@ void AdapterNodelet::useMetadata(const OusterMetadata& metadata, const std::stri
   replaceBatcher(std::move(batcher));
   model_ = std::move(model);
   metadata_ = metadata;
-  receive_stamps_.emplace(static_cast<int64_t>(std::llround(1e9 / metadata.frequency_hz)));
+  // One stamp sequence across metadata changes, so stamps keep increasing through a switch.
+  const int64_t period_ns = static_cast<int64_t>(std::llround(1e9 / metadata.frequency_hz));
+  if (receive_stamps_)
+    receive_stamps_->setNominalPeriod(period_ns);
+  else
+    receive_stamps_.emplace(period_ns);
   NODELET_INFO("Ouster metadata from %s: %s %s, %s, %s, %dx%d", origin.c_str(),
                metadata.prod_line.c_str(), metadata.serial.c_str(), metadata.firmware.c_str(),
                toString(metadata.profile), model_->rows(), model_->columns());
@@ -458,14 +463,13 @@ ros::Time AdapterNodelet::receiveStamp(uint32_t frame_id, uint64_t sensor_stamp_
   ros::Time repaired;
   repaired.fromNSec(static_cast<uint64_t>(stamp.stamp_ns));
   if (!stamp.repaired) return repaired;
-  ++restamped_scans_;
   if (restamp_log_.allow(parameters_.statistics_period_s))
     NODELET_WARN("scan %u: ROS time did not advance since the previous scan (received at %.3f s): stamped %.3f s, "
                  "the sensor clock's interval after it, so that no scan is refused as out of order. ROS time is "
                  "stalling: a bag replay's /clock delivered late on a loaded machine (replay slower, e.g. "
                  "rate:=0.5), or the host clock stepped; with a PTP-synchronised sensor use stamp_source: "
                  "sensor_clock. %zu scans restamped so far",
-                 frame_id, receipt.toSec(), repaired.toSec(), restamped_scans_);
+                 frame_id, receipt.toSec(), repaired.toSec(), receive_stamps_->repaired());
   return repaired;
 }
 
@@ -745,7 +749,8 @@ void AdapterNodelet::onStatisticsTimer(const ros::SteadyTimerEvent&) {
   const std::size_t point_drops = projected.outside_model - projected_before.outside_model;
   const std::size_t missing_clouds = cloud_gaps_.missing() - logged_missing_clouds_;
   const std::size_t other_drops = drops_.total() - logged_drops_.total() + missing_clouds;
-  const std::size_t restamped = restamped_scans_ - logged_restamped_scans_;
+  const std::size_t restamped_scans = receive_stamps_ ? receive_stamps_->repaired() : 0;
+  const std::size_t restamped = restamped_scans - logged_restamped_scans_;
   if (packet_drops + incomplete + point_drops + other_drops + restamped > 0) {
     NODELET_WARN(
         "last %.0f s: packets dropped %zu (wrong size %zu, malformed %zu, bad checksum %zu, stale %zu, "
@@ -764,7 +769,7 @@ void AdapterNodelet::onStatisticsTimer(const ros::SteadyTimerEvent&) {
         drops_.rejected_clouds - logged_drops_.rejected_clouds, missing_clouds,
         drops_.failed_scans - logged_drops_.failed_scans, restamped);
   }
-  logged_restamped_scans_ = restamped_scans_;
+  logged_restamped_scans_ = restamped_scans;
   logged_batcher_statistics_ = batcher;
   logged_projection_statistics_ = projection_statistics_;
   logged_drops_ = drops_;

@@ -160,17 +160,21 @@ double organizedOffRayAngle(const PointCloudInput& cloud, const LidarModel& mode
       cloud.size() != std::size_t(rows) * columns)
     return std::numeric_limits<double>::quiet_NaN();
   const std::vector<int>& shifts = model.intrinsics().pixel_shift_by_row;
+  // About 4000 points, every step-th of the cloud: an odd step, so that the
+  // sample walks across the columns of every row rather than down a few.
+  constexpr std::size_t kSample = 4096;
+  const std::size_t step = std::max<std::size_t>(7, cloud.size() / kSample) | 1;
   std::vector<double> angles;
-  for (int row = 0; row < rows; ++row) {
+  angles.reserve(cloud.size() / step + 1);
+  for (std::size_t i = 0; i < cloud.size(); i += step) {
+    const Eigen::Vector3f& point = cloud.points[i];
+    if (!point.allFinite() || point.squaredNorm() < 1e-6f) continue;
+    const int row = int(i / std::size_t(columns)), input_column = int(i % std::size_t(columns));
     const int shift = order == ColumnOrder::kDestaggered ? ((shifts[row] % columns) + columns) % columns : 0;
-    for (int input_column = 0; input_column < columns; input_column += 7) {
-      const Eigen::Vector3f& point = cloud.points[std::size_t(row) * columns + input_column];
-      if (!point.allFinite() || point.squaredNorm() < 1e-6f) continue;
-      const int column = (input_column - shift + columns) % columns;
-      const Eigen::Vector3f& ray = model.direction(column, row);
-      const Eigen::Vector3f from_origin = point - model.offset(column, row);
-      angles.push_back(std::atan2(double(ray.cross(from_origin).norm()), double(ray.dot(from_origin))));
-    }
+    const int column = (input_column - shift + columns) % columns;
+    const Eigen::Vector3f& ray = model.direction(column, row);
+    const Eigen::Vector3f from_origin = point - model.offset(column, row);
+    angles.push_back(std::atan2(double(ray.cross(from_origin).norm()), double(ray.dot(from_origin))));
   }
   if (angles.size() < 100) return std::numeric_limits<double>::quiet_NaN();
   std::nth_element(angles.begin(), angles.begin() + angles.size() / 2, angles.end());

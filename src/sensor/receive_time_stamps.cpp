@@ -1,13 +1,17 @@
 #include "range_image_mapping/receive_time_stamps.h"
 
 #include <stdexcept>
+#include <string>
 
 namespace range_image_mapping {
 
-ReceiveTimeStamps::ReceiveTimeStamps(int64_t nominal_period_ns) : nominal_period_ns_(nominal_period_ns) {
+ReceiveTimeStamps::ReceiveTimeStamps(int64_t nominal_period_ns) { setNominalPeriod(nominal_period_ns); }
+
+void ReceiveTimeStamps::setNominalPeriod(int64_t nominal_period_ns) {
   if (nominal_period_ns <= 0 || nominal_period_ns >= kLongestRepair_ns)
     throw std::invalid_argument("ReceiveTimeStamps: the nominal period must lie in (0, 1) s, got " +
                                 std::to_string(nominal_period_ns) + " ns");
+  nominal_period_ns_ = nominal_period_ns;
 }
 
 ReceiveTimeStamps::Stamp ReceiveTimeStamps::next(int64_t receipt_ns, int64_t sensor_ns) {

@@ -197,8 +197,9 @@ std::string OdometryHealth::warning() const {
   if (frames_ == 0) return {};
   if (2 * skipped_ > frames_)
     return std::to_string(skipped_) + " of " + std::to_string(frames_) +
-           " scans were skipped, their range images empty: the sensor model places none of their points (check "
-           "the model against the data: rim sensor check INPUT, or give the sensor with --sensor)";
+           " scans were skipped: empty range images (a sensor model that places none of the points: check it "
+           "with rim sensor check INPUT, or give the sensor with --sensor) or stamps that did not advance; the "
+           "frames CSV names each";
   if (failed())
     return std::to_string(degenerate_) + " of " + std::to_string(frames_) + " scans were degenerate" +
            (skipped_ ? " and " + std::to_string(skipped_) + " skipped" : std::string()) +

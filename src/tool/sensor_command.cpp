@@ -21,8 +21,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// Below this share of kept points a model does not explain the data (issue 14: 95 %).
-
 struct SensorCommandOptions {
   std::string input;
   std::string metadata;
