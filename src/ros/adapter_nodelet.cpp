@@ -34,6 +34,7 @@
 #include <Eigen/Geometry>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <deque>
 #include <map>
@@ -141,6 +142,8 @@ class AdapterNodelet : public nodelet::Nodelet {
   void feedPacket(const uint8_t* data, std::size_t size, const ros::Time& receipt);
   void onScan(const LidarScan& scan);
   void onIdleCheck(const ros::SteadyTimerEvent&);
+  // What was lost or repaired on the packet path, as the log summary says it.
+  void diagnosePackets(diagnostic_updater::DiagnosticStatusWrapper& status);
   std::unique_ptr<ScanBatcher> makeBatcher(const OusterMetadata& metadata);
   void replaceBatcher(std::unique_ptr<ScanBatcher> fresh);
 
@@ -207,6 +210,10 @@ class AdapterNodelet : public nodelet::Nodelet {
   bool revolution_in_progress_ = false;
   ros::SteadyTime last_packet_time_;
   ros::Time last_receipt_;  // to notice ROS time jumping back (a bag loop)
+  // diagnosePackets, per kind of problem (drops, incomplete scans, restamped
+  // scans): the count at its previous call, and when it last grew.
+  std::array<std::size_t, 3> diagnosed_packet_problems_{};
+  std::array<ros::SteadyTime, 3> last_packet_problem_;
 
   // PointCloud2 state.
   PointCloudInput cloud_input_;  // reused per cloud
@@ -277,6 +284,9 @@ void AdapterNodelet::startOusterInput() {
       node.subscribe("metadata", 1, &AdapterNodelet::onMetadataMessage, this);
   input_subscriber_ = node.subscribe("lidar_packets", parameters_.packet_queue_size,
                                      &AdapterNodelet::onPacketMessage, this);
+  diagnostics_ = std::make_unique<WallClockDiagnostics>(getNodeHandle(), getPrivateNodeHandle(), getName(),
+                                                        "lidar_adapter");
+  diagnostics_->updater().add("Ouster packets", this, &AdapterNodelet::diagnosePackets);
   if (parameters_.flush_after_idle_s > 0)
     idle_timer_ = node.createSteadyTimer(ros::WallDuration(parameters_.flush_after_idle_s / 2),
                                          &AdapterNodelet::onIdleCheck, this);
@@ -471,6 +481,55 @@ ros::Time AdapterNodelet::receiveStamp(uint32_t frame_id, uint64_t sensor_stamp_
                  "sensor_clock. %zu scans restamped so far",
                  frame_id, receipt.toSec(), repaired.toSec(), receive_stamps_->repaired());
   return repaired;
+}
+
+// WARN while anything was dropped or restamped within the last statistics
+// period, naming what; the totals since start always.
+void AdapterNodelet::diagnosePackets(diagnostic_updater::DiagnosticStatusWrapper& status) {
+  const BatcherStatistics batcher = batcherStatistics();
+  const std::size_t packet_drops = batcher.wrong_size + batcher.malformed + batcher.bad_checksum + batcher.stale;
+  const std::size_t restamped = receive_stamps_ ? receive_stamps_->repaired() : 0;
+  const std::array<std::size_t, 3> problems{packet_drops + drops_.total(), batcher.incomplete_scans, restamped};
+  const ros::SteadyTime now = ros::SteadyTime::now();
+  std::array<bool, 3> recent{};
+  for (std::size_t kind = 0; kind < problems.size(); ++kind) {
+    if (problems[kind] != diagnosed_packet_problems_[kind]) last_packet_problem_[kind] = now;
+    diagnosed_packet_problems_[kind] = problems[kind];
+    recent[kind] = !last_packet_problem_[kind].isZero() &&
+                   (now - last_packet_problem_[kind]).toSec() < parameters_.statistics_period_s;
+  }
+  if (!metadata_) {
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN,
+                   "no Ouster metadata yet: publish it (latched) on " + metadata_subscriber_.getTopic() +
+                       " or set metadata_file; packets wait for it");
+  } else if (batcher.packets == 0) {
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "no packets on " + input_subscriber_.getTopic());
+  } else if (recent[0] || recent[1] || recent[2]) {
+    std::string summary = "in the last " + std::to_string(int(parameters_.statistics_period_s)) + " s:";
+    if (recent[0]) summary += " packets or scans dropped (see the counts);";
+    if (recent[1])
+      summary += " incomplete scans (packets lost on the network, or packet_queue_size too small for the replay);";
+    if (recent[2])
+      summary += " scans restamped because ROS time stood still (a late /clock on a loaded machine: replay "
+                 "slower, or use stamp_source sensor_clock with a synchronised sensor);";
+    summary.pop_back();
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, summary);
+  } else {
+    status.summary(diagnostic_msgs::DiagnosticStatus::OK, "decoding");
+  }
+  status.add("packets", batcher.packets);
+  status.add("scans", batcher.scans);
+  status.add("incomplete scans", batcher.incomplete_scans);
+  status.add("missing columns", batcher.missing_columns);
+  status.add("packets dropped: wrong size", batcher.wrong_size);
+  status.add("packets dropped: malformed", batcher.malformed);
+  status.add("packets dropped: bad checksum", batcher.bad_checksum);
+  status.add("packets dropped: stale", batcher.stale);
+  status.add("messages dropped: not Ouster packets", drops_.foreign_packet_messages);
+  status.add("packets dropped: no metadata", drops_.packets_without_metadata);
+  status.add("scans failed", drops_.failed_scans);
+  status.add("scans restamped (ROS time stood still)", restamped);
+  status.add("stamp source", parameters_.stamp_source == StampSource::kSensorClock ? "sensor_clock" : "receive_time");
 }
 
 // A replay that ends, or a sensor that stops, leaves its last revolution in the

@@ -10,6 +10,7 @@
 
 #include "spin_until.h"
 
+#include <diagnostic_msgs/DiagnosticArray.h>
 #include <gtest/gtest.h>
 #include <ros/ros.h>
 #include <rosgraph_msgs/Clock.h>
@@ -206,6 +207,25 @@ TEST_F(OusterPacketStreamTest, StandingClockStillGivesIncreasingStamps) {
               sensor_stamp_ns(*images_[i]) - sensor_stamp_ns(*images_[i - 1]))
         << "spaced by the sensor clock";
   }
+  // The repair is not silent: the packet path's diagnostics warn and count it.
+  diagnostic_msgs::DiagnosticStatus packets_status;
+  ros::Subscriber diagnostics = node_.subscribe<diagnostic_msgs::DiagnosticArray>(
+      "/diagnostics", 20, [&](const diagnostic_msgs::DiagnosticArray::ConstPtr& array) {
+        for (const diagnostic_msgs::DiagnosticStatus& status : array->status)
+          if (status.name.find("Ouster packets") != std::string::npos) packets_status = status;
+      });
+  const auto restamped = [&] {
+    for (const diagnostic_msgs::KeyValue& value : packets_status.values)
+      if (value.key == "scans restamped (ROS time stood still)") return std::stoul(value.value);
+    return 0ul;
+  };
+  ASSERT_TRUE(spinUntil([&] { return restamped() >= images_.size() - 1; }, timeout_s_))
+      << "no Ouster packets diagnostics counting " << images_.size() - 1 << " restamped scans; last summary: '"
+      << packets_status.message << "'";
+  EXPECT_EQ(packets_status.level, diagnostic_msgs::DiagnosticStatus::WARN);
+  EXPECT_NE(packets_status.message.find("ROS time stood still"), std::string::npos) << packets_status.message;
+  EXPECT_NE(packets_status.message.find("sensor_clock"), std::string::npos) << "names the fix: "
+                                                                            << packets_status.message;
 }
 
 }  // namespace
