@@ -411,8 +411,10 @@ bool mayBeShared(const MeshChunk& chunk, const LatticeEdge& name) {
 }
 
 // One mesh from chunks in the given order; the first chunk that cut a
-// lattice edge provides its vertex.
-TriangleMesh weldChunks(const std::vector<const MeshChunk*>& chunks) {
+// lattice edge provides its vertex. One thread, with a hash map of names:
+// for chunks whose block edge is not known (weldChunks below is the
+// parallel weld of meshBlock's chunks, with the same result).
+TriangleMesh weldChunksByName(const std::vector<const MeshChunk*>& chunks) {
   TriangleMesh mesh;
   std::size_t vertex_count = 0, triangle_count = 0;
   bool with_intensity = false, all_with_intensity = true;
@@ -456,6 +458,128 @@ TriangleMesh weldChunks(const std::vector<const MeshChunk*>& chunks) {
     for (const Eigen::Vector3i& triangle : chunk->triangles)
       mesh.triangles.emplace_back(remap[triangle[0]], remap[triangle[1]], remap[triangle[2]]);
   }
+  return mesh;
+}
+
+bool nameLess(const LatticeEdge& a, const LatticeEdge& b) {
+  return std::array<int, 4>{a.block.x(), a.block.y(), a.block.z(), a.index} <
+         std::array<int, 4>{b.block.x(), b.block.y(), b.block.z(), b.index};
+}
+
+// weldChunksByName's result on threads: a vertex on a lattice edge can only
+// be shared with the chunks of the (up to 4) blocks whose cubes hold that
+// edge, so the chunk that provides it (the first of them in the given order
+// that cut the edge) is found by looking in those chunks alone; vertices are
+// then numbered by prefix sums, in the serial weld's order.
+TriangleMesh weldChunks(const std::vector<const MeshChunk*>& chunks) {
+  const int edge = chunks.empty() ? 8 : chunks.front()->block_edge;
+  for (const MeshChunk* chunk : chunks)
+    if (chunk->block_edge != edge || (edge != 8 && edge != 16)) return weldChunksByName(chunks);
+  const std::size_t count = chunks.size();
+  std::vector<std::size_t> first_vertex(count + 1, 0), first_triangle(count + 1, 0);
+  bool with_intensity = true, any_intensity = false;
+  for (std::size_t c = 0; c < count; ++c) {
+    const MeshChunk& chunk = *chunks[c];
+    if (chunk.vertex_edges.size() != chunk.vertices.size() || chunk.normals.size() != chunk.vertices.size())
+      throw MappingError("marching cubes: chunk " + keyText(chunk.key) +
+                         " has vertices, normals and lattice edges of different counts");
+    first_vertex[c + 1] = first_vertex[c] + chunk.vertices.size();
+    first_triangle[c + 1] = first_triangle[c] + chunk.triangles.size();
+    if (chunk.vertices.empty()) continue;
+    const bool has = chunk.intensities.size() == chunk.vertices.size();
+    any_intensity = any_intensity || has;
+    with_intensity = with_intensity && has;
+  }
+  with_intensity = with_intensity && any_intensity;
+  tsl::robin_map<BlockKey, uint32_t, BlockKeyHash> position_of;
+  position_of.reserve(count);
+  for (std::size_t c = 0; c < count; ++c) position_of.emplace(chunks[c]->key, uint32_t(c));
+
+  // Per chunk, its vertices other chunks may share, sorted by name.
+  std::vector<std::vector<std::pair<LatticeEdge, int>>> shared(count);
+  // Per chunk vertex: its index in the mesh, or (until resolved) -1 - the
+  // flat index of the providing chunk's vertex.
+  std::vector<int64_t> remap(first_vertex[count]);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 16), [&](const tbb::blocked_range<std::size_t>& range) {
+    for (std::size_t c = range.begin(); c != range.end(); ++c) {
+      const MeshChunk& chunk = *chunks[c];
+      for (std::size_t v = 0; v < chunk.vertices.size(); ++v)
+        if (mayBeShared(chunk, chunk.vertex_edges[v])) shared[c].emplace_back(chunk.vertex_edges[v], int(v));
+      std::sort(shared[c].begin(), shared[c].end(), [](const auto& a, const auto& b) { return nameLess(a.first, b.first); });
+    }
+  });
+  const int bits = edge == 8 ? 3 : 4, mask = edge - 1;
+  std::vector<std::size_t> provided(count, 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 16), [&](const tbb::blocked_range<std::size_t>& range) {
+    for (std::size_t c = range.begin(); c != range.end(); ++c) {
+      const MeshChunk& chunk = *chunks[c];
+      std::size_t next = first_vertex[c];
+      for (std::size_t v = 0; v < chunk.vertices.size(); ++v) {
+        const LatticeEdge& name = chunk.vertex_edges[v];
+        std::size_t provider = c, provider_vertex = v;
+        if (mayBeShared(chunk, name)) {
+          // The cubes around the edge lie in its block and, across each
+          // other axis where the edge is on the block's lower face, the
+          // block below.
+          const int axis = name.index % 3, voxel = name.index / 3;
+          const int lower[3] = {voxel & mask, (voxel >> bits) & mask, voxel >> (2 * bits)};
+          int on_lower_face = 0;
+          for (int other = 0; other < 3; ++other)
+            if (other != axis && lower[other] == 0) on_lower_face |= 1 << other;
+          for (int below = on_lower_face;; below = (below - 1) & on_lower_face) {
+            const BlockKey key = name.block - Eigen::Vector3i(below & 1, (below >> 1) & 1, below >> 2);
+            const auto found = position_of.find(key);
+            if (found != position_of.end() && found->second < provider) {
+              const auto& candidates = shared[found->second];
+              const auto match = std::lower_bound(candidates.begin(), candidates.end(), name,
+                                                  [](const auto& a, const LatticeEdge& b) { return nameLess(a.first, b); });
+              if (match != candidates.end() && match->first == name) {
+                provider = found->second;
+                provider_vertex = std::size_t(match->second);
+              }
+            }
+            if (below == 0) break;
+          }
+        }
+        remap[first_vertex[c] + v] = provider == c ? int64_t(next++) : -1 - int64_t(first_vertex[provider] + provider_vertex);
+      }
+      provided[c] = next - first_vertex[c];
+    }
+  });
+  // Mesh indices: chunk c's provided vertices follow those of the chunks before it.
+  std::vector<std::size_t> first_provided(count + 1, 0);
+  for (std::size_t c = 0; c < count; ++c) first_provided[c + 1] = first_provided[c] + provided[c];
+  TriangleMesh mesh;
+  mesh.vertices.resize(first_provided[count]);
+  mesh.normals.resize(first_provided[count]);
+  if (with_intensity) mesh.intensities.resize(first_provided[count]);
+  mesh.triangles.resize(first_triangle[count]);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 16), [&](const tbb::blocked_range<std::size_t>& range) {
+    for (std::size_t c = range.begin(); c != range.end(); ++c) {
+      const MeshChunk& chunk = *chunks[c];
+      const int64_t shift = int64_t(first_provided[c]) - int64_t(first_vertex[c]);
+      for (std::size_t v = 0; v < chunk.vertices.size(); ++v) {
+        int64_t& index = remap[first_vertex[c] + v];
+        if (index < 0) continue;
+        index += shift;
+        mesh.vertices[std::size_t(index)] = chunk.vertices[v];
+        mesh.normals[std::size_t(index)] = chunk.normals[v];
+        if (with_intensity) mesh.intensities[std::size_t(index)] = chunk.intensities[v];
+      }
+    }
+  });
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 16), [&](const tbb::blocked_range<std::size_t>& range) {
+    for (std::size_t c = range.begin(); c != range.end(); ++c) {
+      const MeshChunk& chunk = *chunks[c];
+      const auto index = [&](int v) {
+        const int64_t own = remap[first_vertex[c] + std::size_t(v)];
+        return int(own >= 0 ? own : remap[std::size_t(-1 - own)]);  // a provider's entry is never negative
+      };
+      Eigen::Vector3i* out = mesh.triangles.data() + first_triangle[c];
+      for (const Eigen::Vector3i& triangle : chunk.triangles)
+        *out++ = Eigen::Vector3i(index(triangle[0]), index(triangle[1]), index(triangle[2]));
+    }
+  });
   return mesh;
 }
 
