@@ -57,6 +57,7 @@ struct Row {
   std::vector<double> insert_wall_s, insert_cpu_s;  // per scan
   std::vector<double> mesh_update_s, mesh_update_cpu_s;  // per scan (ours)
   std::vector<double> mesh_pending;                      // blocks left waiting by the budget, per scan
+  std::vector<double> mesh_blocks;                       // blocks re-meshed, per scan
   double full_mesh_s = 0.0;
   std::size_t cells = 0, memory_bytes = 0, triangles = 0;
   evaluation::SurfaceMetrics metrics[3];  // at kThresholdVoxels
@@ -64,21 +65,21 @@ struct Row {
 };
 
 void printHeader() {
-  std::printf("%-12s %-14s %7s %7s %6s %7s %8s %8s %8s %8s %8s %8s %8s %7s %6s %6s %6s %6s %6s %6s %6s\n",
+  std::printf("%-12s %-14s %7s %7s %6s %7s %8s %8s %8s %8s %8s %8s %8s %8s %7s %6s %6s %6s %6s %6s %6s %6s\n",
               "sequence",
-              "method", "ins ms", "median", "Hz", "cpu ms", "mesh ms", "mesh p95", "mesh max", "mesh cpu", "waiting",
+              "method", "ins ms", "median", "Hz", "cpu ms", "mesh ms", "mesh p95", "mesh max", "mesh cpu", "remeshed", "waiting",
               "full ms", "kilo-tri", "cells", "MB", "R@3", "F@3", "F@1", "F@0.5", "Pscene", "Fscene");
 }
 
 void printRow(const std::string& sequence, const Row& row) {
   const double wall = mean(row.insert_wall_s);
   // OctoMap has no mesh: its mesh columns are dashes.
-  char meshing[120] = "       -        -        -        -        -        -        -";
+  char meshing[140] = "       -        -        -        -        -        -        -        -";
   if (!row.mesh_update_s.empty())
-    std::snprintf(meshing, sizeof meshing, "%8.2f %8.2f %8.2f %8.2f %8.0f %8.1f %8zu", median(row.mesh_update_s) * 1e3,
+    std::snprintf(meshing, sizeof meshing, "%8.2f %8.2f %8.2f %8.2f %8.0f %8.0f %8.1f %8zu", median(row.mesh_update_s) * 1e3,
                   percentile(row.mesh_update_s, 0.95) * 1e3,
                   *std::max_element(row.mesh_update_s.begin(), row.mesh_update_s.end()) * 1e3,
-                  median(row.mesh_update_cpu_s) * 1e3, median(row.mesh_pending), row.full_mesh_s * 1e3,
+                  median(row.mesh_update_cpu_s) * 1e3, median(row.mesh_blocks), median(row.mesh_pending), row.full_mesh_s * 1e3,
                   row.triangles / 1000);
   std::printf("%-12s %-14s %7.1f %7.1f %6.2f %7.1f %s %7zu %6.1f %6.4f %6.4f %6.4f %6.4f %6.4f %6.4f\n", sequence.c_str(),
               row.method.c_str(), wall * 1e3, median(row.insert_wall_s) * 1e3, 1.0 / wall,
@@ -132,6 +133,7 @@ Row runOurs(const test::MappingPreset& preset, const SequenceAndScene& truth, in
     row.mesh_update_s.push_back(meshing.wall());
     row.mesh_update_cpu_s.push_back(meshing.cpu());
     row.mesh_pending.push_back(double(update.pending));
+    row.mesh_blocks.push_back(double(update.changed.size()));
   }
   const Timer full;
   const TriangleMesh mesh = mapping::extractMesh(grid);
@@ -178,7 +180,7 @@ int run(int argc, char** argv) {
               cpuModel().c_str(), std::thread::hardware_concurrency(), kThreads, loadAverage().c_str());
   std::printf("ins ms: integration (ours, %d threads) or insertPointCloud (OctoMap, 1 thread) per scan, wall;\n"
               "cpu ms: process CPU time of it (mean); mesh: incremental mesh update after each scan, wall median,\n"
-              "95th percentile and max, CPU median; waiting: changed blocks the budget left for later updates\n"
+              "95th percentile and max, CPU median; remeshed: blocks re-meshed per update (median); waiting: changed blocks the budget left for later updates\n"
               "(median); full ms: one extraction of the whole grid at the end; cells: blocks (ours) or leaves\n"
               "(OctoMap); R@3: recall at 3 x voxel, F@n: F-score at n x voxel against the seen surface;\n"
               "Pscene, Fscene: precision at 3 x voxel against every surface of the scene near the route, F with it.\n",

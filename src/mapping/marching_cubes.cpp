@@ -31,16 +31,20 @@ std::string keyText(const BlockKey& key) {
 }
 
 // A block whose arrays do not match the grid would be read out of bounds.
-void checkBlockArrays(const VoxelBlock& block, std::size_t voxels, bool intensity) {
-  const auto check = [&](const std::vector<float>& values, const char* name) {
-    if (values.size() != voxels)
-      throw MappingError("marching cubes: block " + keyText(block.key) + " has " +
-                         std::to_string(values.size()) + " " + name + " values, expected " +
-                         std::to_string(voxels));
-  };
-  check(block.sdf, "sdf");
-  check(block.weight, "weight");
-  if (intensity) check(block.intensity, "intensity");
+[[noreturn]] void throwBadBlockArrays(const VoxelBlock& block, std::size_t voxels, bool intensity) {
+  const auto name = [&]() -> std::pair<const char*, std::size_t> {
+    if (block.sdf.size() != voxels) return {"sdf", block.sdf.size()};
+    if (block.weight.size() != voxels) return {"weight", block.weight.size()};
+    return {"intensity", intensity ? block.intensity.size() : voxels};
+  }();
+  throw MappingError("marching cubes: block " + keyText(block.key) + " has " + std::to_string(name.second) + " " +
+                     name.first + " values, expected " + std::to_string(voxels));
+}
+
+// Inline: it runs for a block and its 7 neighbours each time a block is meshed.
+inline void checkBlockArrays(const VoxelBlock& block, std::size_t voxels, bool intensity) {
+  if (block.sdf.size() != voxels || block.weight.size() != voxels || (intensity && block.intensity.size() != voxels))
+    throwBadBlockArrays(block, voxels, intensity);
 }
 
 // Meshes one block at a time; one per thread, so its buffers are reused.
@@ -51,28 +55,47 @@ void checkBlockArrays(const VoxelBlock& block, std::size_t voxels, bool intensit
 class BlockMesher {
  public:
   MeshChunk mesh(const VoxelBlockGrid& grid, const VoxelBlock& block, const MeshOptions& options) {
-    MeshChunk chunk;
-    chunk.key = block.key;
-    chunk.block_edge = grid.blockEdge();
-    if (!load(grid, block, options)) return chunk;
+    MeshChunk result;
+    result.key = block.key;
+    result.block_edge = grid.blockEdge();
+    if (!load(grid, block, options)) return result;
+    // Built in reused buffers, then copied once at its size: growing five
+    // fresh vectors per chunk cost more allocations than the copy.
+    MeshChunk& chunk = scratch_;
+    chunk.vertices.clear();
+    chunk.normals.clear();
+    chunk.intensities.clear();
+    chunk.triangles.clear();
+    chunk.vertex_edges.clear();
     const MarchingCubesCases& cases = MarchingCubesCases::instance();
     std::array<int, 8> corner_offset;
     for (int c = 0; c < 8; ++c)
       corner_offset[c] = (c & 1) * stride_[0] + ((c >> 1) & 1) * stride_[1] + (c >> 2) * stride_[2];
     const int edge = edge_;
+    const uint32_t cube_bits = (1u << edge) - 1u;
     for (int z = 0; z < edge; ++z)
-      for (int y = 0; y < edge; ++y)
-        for (int x = 0; x < edge; ++x) {
+      for (int y = 0; y < edge; ++y) {
+        // Bit x: cube (x, y, z) has all 8 corners observed and both signs.
+        // Most cubes of a surface block have one sign: they cost a few bit
+        // operations per row here instead of 8 reads each.
+        const int row = y + padded_ * z;
+        const uint32_t observed = observed_bits_[row] & observed_bits_[row + 1] & observed_bits_[row + padded_] &
+                                  observed_bits_[row + padded_ + 1];
+        const uint32_t any_negative = negative_bits_[row] | negative_bits_[row + 1] |
+                                      negative_bits_[row + padded_] | negative_bits_[row + padded_ + 1];
+        const uint32_t all_negative = negative_bits_[row] & negative_bits_[row + 1] &
+                                      negative_bits_[row + padded_] & negative_bits_[row + padded_ + 1];
+        uint32_t active = observed & (observed >> 1) & (any_negative | (any_negative >> 1)) &
+                          ~(all_negative & (all_negative >> 1)) & cube_bits;
+        for (; active != 0; active &= active - 1) {
+          const int x = __builtin_ctz(active);
           const int base = paddedIndex(x, y, z);
           int corner_signs = 0;
-          bool all_observed = true;
           std::array<float, 8> value;
           for (int c = 0; c < 8; ++c) {
-            all_observed = all_observed && observed_[base + corner_offset[c]];
             value[c] = sdf_[base + corner_offset[c]];
             corner_signs |= int(value[c] < 0.0f) << c;
           }
-          if (!all_observed || corner_signs == 0 || corner_signs == 255) continue;
           const MarchingCubesCases::Triangles triangles =
               cases.triangles(corner_signs, faceDecisions(cases, corner_signs, value));
           const Eigen::Vector3i cube(x, y, z);
@@ -100,9 +123,15 @@ class BlockMesher {
             chunk.triangles.push_back(triangle);
           }
         }
+      }
     for (int local_edge : vertex_local_edges_) vertex_of_edge_[local_edge] = -1;
     vertex_local_edges_.clear();
-    return chunk;
+    result.vertices.assign(chunk.vertices.begin(), chunk.vertices.end());
+    result.normals.assign(chunk.normals.begin(), chunk.normals.end());
+    result.intensities.assign(chunk.intensities.begin(), chunk.intensities.end());
+    result.triangles.assign(chunk.triangles.begin(), chunk.triangles.end());
+    result.vertex_edges.assign(chunk.vertex_edges.begin(), chunk.vertex_edges.end());
+    return result;
   }
 
  private:
@@ -119,16 +148,33 @@ class BlockMesher {
     observed_.resize(padded_voxels);
     if (with_intensity_) intensity_.resize(padded_voxels);
     vertex_of_edge_.resize(3 * std::size_t(edge_ + 1) * (edge_ + 1) * (edge_ + 1), -1);
+    const std::size_t lattice_points = std::size_t(edge_ + 1) * (edge_ + 1) * (edge_ + 1);
+    if (gradients_.size() != lattice_points) {
+      gradients_.assign(lattice_points, Eigen::Vector3f::Zero());
+      gradient_chunk_.assign(lattice_points, 0u);
+      chunk_number_ = 0;
+    }
+    if (++chunk_number_ == 0) {  // wrapped: forget every cached gradient
+      std::fill(gradient_chunk_.begin(), gradient_chunk_.end(), 0u);
+      chunk_number_ = 1;
+    }
 
     const std::size_t voxels = std::size_t(grid.voxelsPerBlock());
     checkBlockArrays(block, voxels, with_intensity_);
+    neighbours_[0] = &block;
+    for (int neighbour = 1; neighbour < 8; ++neighbour) {
+      const Eigen::Vector3i offset(neighbour & 1, (neighbour >> 1) & 1, neighbour >> 2);
+      neighbours_[neighbour] = grid.find(block.key + offset);
+      if (neighbours_[neighbour]) checkBlockArrays(*neighbours_[neighbour], voxels, with_intensity_);
+    }
     const float min_weight = options.min_weight;
-    if (!mayCrossZero(grid, block, min_weight)) return false;
+    if (!mayCrossZero(block, min_weight)) return false;
+    observed_bits_.assign(std::size_t(padded_) * padded_, 0u);
+    negative_bits_.assign(std::size_t(padded_) * padded_, 0u);
     bool has_negative = false, has_positive = false;
     for (int neighbour = 0; neighbour < 8; ++neighbour) {
       const Eigen::Vector3i offset(neighbour & 1, (neighbour >> 1) & 1, neighbour >> 2);
-      const VoxelBlock* source = neighbour == 0 ? &block : grid.find(block.key + offset);
-      if (source) checkBlockArrays(*source, voxels, with_intensity_);
+      const VoxelBlock* source = neighbours_[neighbour];
       const Eigen::Vector3i begin = offset * edge_;
       Eigen::Vector3i end;
       for (int axis = 0; axis < 3; ++axis) end[axis] = offset[axis] == 0 ? edge_ : padded_;
@@ -149,14 +195,19 @@ class BlockMesher {
             continue;
           }
           const int voxel = edge_ * ((y - begin.y()) + edge_ * (z - begin.z()));
+          uint32_t observed_row = 0, negative_row = 0;
           for (int x = 0; x < run; ++x) {
             const float sdf = sdf_in[voxel + x], weight = weight_in[voxel + x];
             const bool is_observed = weight > 0.0f && weight >= min_weight && std::isfinite(sdf);
             observed[target + x] = is_observed;
             sdf_out[target + x] = sdf;
+            observed_row |= uint32_t(is_observed) << x;
+            negative_row |= uint32_t(sdf < 0.0f) << x;
             has_negative = has_negative || (is_observed && sdf < 0.0f);
             has_positive = has_positive || (is_observed && sdf >= 0.0f);
           }
+          observed_bits_[y + padded_ * z] |= observed_row << begin.x();
+          negative_bits_[y + padded_ * z] |= negative_row << begin.x();
           if (intensity_out) std::copy(intensity_in + voxel, intensity_in + voxel + run, intensity_out + target);
         }
     }
@@ -169,7 +220,7 @@ class BlockMesher {
   // space, or wholly behind a surface): this look costs far less than
   // load's copy. Every cube has its lower corner in the block, so a block
   // without an observed voxel has none either.
-  bool mayCrossZero(const VoxelBlockGrid& grid, const VoxelBlock& block, float min_weight) const {
+  bool mayCrossZero(const VoxelBlock& block, float min_weight) const {
     int signs = 0;  // bit 0: an observed negative value, bit 1: an observed non-negative one
     const auto look = [&](const float* sdf, const float* weight, int begin, int end, int step) {
       int negative = 0, positive = 0;
@@ -186,9 +237,8 @@ class BlockMesher {
     if (signs == 0) return false;
     for (int neighbour = 1; neighbour < 8; ++neighbour) {
       const Eigen::Vector3i offset(neighbour & 1, (neighbour >> 1) & 1, neighbour >> 2);
-      const VoxelBlock* source = grid.find(block.key + offset);
+      const VoxelBlock* source = neighbours_[neighbour];
       if (!source) continue;
-      checkBlockArrays(*source, std::size_t(voxels), with_intensity_);
       // The neighbour's voxels at index 0 along each axis where it lies above.
       const float* sdf = source->sdf.data();
       const float* weight = source->weight.data();
@@ -228,7 +278,7 @@ class BlockMesher {
   float derivative(const Eigen::Vector3i& point, int axis) const {
     const int index = paddedIndex(point.x(), point.y(), point.z());
     const int step = stride_[axis];
-    const bool lower_face = point[axis] % edge_ == 0;
+    const bool lower_face = point[axis] == 0 || point[axis] == edge_;
     const bool minus = !lower_face && observed_[index - step];
     const bool plus = observed_[index + step];
     if (minus && plus) return 0.5f * (sdf_[index + step] - sdf_[index - step]);
@@ -241,8 +291,14 @@ class BlockMesher {
     return 0.0f;
   }
 
-  Eigen::Vector3f gradient(const Eigen::Vector3i& point) const {
-    return {derivative(point, 0), derivative(point, 1), derivative(point, 2)};
+  // A lattice point ends up to 6 cut edges: its gradient is computed once per chunk.
+  const Eigen::Vector3f& gradient(const Eigen::Vector3i& point) {
+    const int index = point.x() + (edge_ + 1) * (point.y() + (edge_ + 1) * point.z());
+    if (gradient_chunk_[index] != chunk_number_) {
+      gradient_chunk_[index] = chunk_number_;
+      gradients_[index] = {derivative(point, 0), derivative(point, 1), derivative(point, 2)};
+    }
+    return gradients_[index];
   }
 
   // The chunk's vertex on the lattice edge from `lower` (padded coordinates)
@@ -324,6 +380,14 @@ class BlockMesher {
   bool with_intensity_ = false;
   std::vector<float> sdf_, intensity_;
   std::vector<uint8_t> observed_;
+  // Per padded (y, z) row, bit x: the voxel is observed / its SDF is negative.
+  std::vector<uint32_t> observed_bits_, negative_bits_;
+  std::array<const VoxelBlock*, 8> neighbours_{};  // the block and its +1 neighbours (nullptr: absent)
+  MeshChunk scratch_;
+  // Gradients at the lattice points [0, edge]^3, valid where gradient_chunk_ holds chunk_number_.
+  std::vector<Eigen::Vector3f> gradients_;
+  std::vector<uint32_t> gradient_chunk_;
+  uint32_t chunk_number_ = 0;
   std::vector<int> vertex_of_edge_;      // local lattice edge -> vertex of the current chunk
   std::vector<int> vertex_local_edges_;  // what to reset after the chunk
   std::vector<int> loop_vertices_;
@@ -347,8 +411,10 @@ bool mayBeShared(const MeshChunk& chunk, const LatticeEdge& name) {
 }
 
 // One mesh from chunks in the given order; the first chunk that cut a
-// lattice edge provides its vertex.
-TriangleMesh weldChunks(const std::vector<const MeshChunk*>& chunks) {
+// lattice edge provides its vertex. One thread, with a hash map of names:
+// for chunks whose block edge is not known (weldChunks below is the
+// parallel weld of meshBlock's chunks, with the same result).
+TriangleMesh weldChunksByName(const std::vector<const MeshChunk*>& chunks) {
   TriangleMesh mesh;
   std::size_t vertex_count = 0, triangle_count = 0;
   bool with_intensity = false, all_with_intensity = true;
@@ -392,6 +458,128 @@ TriangleMesh weldChunks(const std::vector<const MeshChunk*>& chunks) {
     for (const Eigen::Vector3i& triangle : chunk->triangles)
       mesh.triangles.emplace_back(remap[triangle[0]], remap[triangle[1]], remap[triangle[2]]);
   }
+  return mesh;
+}
+
+bool nameLess(const LatticeEdge& a, const LatticeEdge& b) {
+  return std::array<int, 4>{a.block.x(), a.block.y(), a.block.z(), a.index} <
+         std::array<int, 4>{b.block.x(), b.block.y(), b.block.z(), b.index};
+}
+
+// weldChunksByName's result on threads: a vertex on a lattice edge can only
+// be shared with the chunks of the (up to 4) blocks whose cubes hold that
+// edge, so the chunk that provides it (the first of them in the given order
+// that cut the edge) is found by looking in those chunks alone; vertices are
+// then numbered by prefix sums, in the serial weld's order.
+TriangleMesh weldChunks(const std::vector<const MeshChunk*>& chunks) {
+  const int edge = chunks.empty() ? 8 : chunks.front()->block_edge;
+  for (const MeshChunk* chunk : chunks)
+    if (chunk->block_edge != edge || (edge != 8 && edge != 16)) return weldChunksByName(chunks);
+  const std::size_t count = chunks.size();
+  std::vector<std::size_t> first_vertex(count + 1, 0), first_triangle(count + 1, 0);
+  bool with_intensity = true, any_intensity = false;
+  for (std::size_t c = 0; c < count; ++c) {
+    const MeshChunk& chunk = *chunks[c];
+    if (chunk.vertex_edges.size() != chunk.vertices.size() || chunk.normals.size() != chunk.vertices.size())
+      throw MappingError("marching cubes: chunk " + keyText(chunk.key) +
+                         " has vertices, normals and lattice edges of different counts");
+    first_vertex[c + 1] = first_vertex[c] + chunk.vertices.size();
+    first_triangle[c + 1] = first_triangle[c] + chunk.triangles.size();
+    if (chunk.vertices.empty()) continue;
+    const bool has = chunk.intensities.size() == chunk.vertices.size();
+    any_intensity = any_intensity || has;
+    with_intensity = with_intensity && has;
+  }
+  with_intensity = with_intensity && any_intensity;
+  tsl::robin_map<BlockKey, uint32_t, BlockKeyHash> position_of;
+  position_of.reserve(count);
+  for (std::size_t c = 0; c < count; ++c) position_of.emplace(chunks[c]->key, uint32_t(c));
+
+  // Per chunk, its vertices other chunks may share, sorted by name.
+  std::vector<std::vector<std::pair<LatticeEdge, int>>> shared(count);
+  // Per chunk vertex: its index in the mesh, or (until resolved) -1 - the
+  // flat index of the providing chunk's vertex.
+  std::vector<int64_t> remap(first_vertex[count]);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 16), [&](const tbb::blocked_range<std::size_t>& range) {
+    for (std::size_t c = range.begin(); c != range.end(); ++c) {
+      const MeshChunk& chunk = *chunks[c];
+      for (std::size_t v = 0; v < chunk.vertices.size(); ++v)
+        if (mayBeShared(chunk, chunk.vertex_edges[v])) shared[c].emplace_back(chunk.vertex_edges[v], int(v));
+      std::sort(shared[c].begin(), shared[c].end(), [](const auto& a, const auto& b) { return nameLess(a.first, b.first); });
+    }
+  });
+  const int bits = edge == 8 ? 3 : 4, mask = edge - 1;
+  std::vector<std::size_t> provided(count, 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 16), [&](const tbb::blocked_range<std::size_t>& range) {
+    for (std::size_t c = range.begin(); c != range.end(); ++c) {
+      const MeshChunk& chunk = *chunks[c];
+      std::size_t next = first_vertex[c];
+      for (std::size_t v = 0; v < chunk.vertices.size(); ++v) {
+        const LatticeEdge& name = chunk.vertex_edges[v];
+        std::size_t provider = c, provider_vertex = v;
+        if (mayBeShared(chunk, name)) {
+          // The cubes around the edge lie in its block and, across each
+          // other axis where the edge is on the block's lower face, the
+          // block below.
+          const int axis = name.index % 3, voxel = name.index / 3;
+          const int lower[3] = {voxel & mask, (voxel >> bits) & mask, voxel >> (2 * bits)};
+          int on_lower_face = 0;
+          for (int other = 0; other < 3; ++other)
+            if (other != axis && lower[other] == 0) on_lower_face |= 1 << other;
+          for (int below = on_lower_face;; below = (below - 1) & on_lower_face) {
+            const BlockKey key = name.block - Eigen::Vector3i(below & 1, (below >> 1) & 1, below >> 2);
+            const auto found = position_of.find(key);
+            if (found != position_of.end() && found->second < provider) {
+              const auto& candidates = shared[found->second];
+              const auto match = std::lower_bound(candidates.begin(), candidates.end(), name,
+                                                  [](const auto& a, const LatticeEdge& b) { return nameLess(a.first, b); });
+              if (match != candidates.end() && match->first == name) {
+                provider = found->second;
+                provider_vertex = std::size_t(match->second);
+              }
+            }
+            if (below == 0) break;
+          }
+        }
+        remap[first_vertex[c] + v] = provider == c ? int64_t(next++) : -1 - int64_t(first_vertex[provider] + provider_vertex);
+      }
+      provided[c] = next - first_vertex[c];
+    }
+  });
+  // Mesh indices: chunk c's provided vertices follow those of the chunks before it.
+  std::vector<std::size_t> first_provided(count + 1, 0);
+  for (std::size_t c = 0; c < count; ++c) first_provided[c + 1] = first_provided[c] + provided[c];
+  TriangleMesh mesh;
+  mesh.vertices.resize(first_provided[count]);
+  mesh.normals.resize(first_provided[count]);
+  if (with_intensity) mesh.intensities.resize(first_provided[count]);
+  mesh.triangles.resize(first_triangle[count]);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 16), [&](const tbb::blocked_range<std::size_t>& range) {
+    for (std::size_t c = range.begin(); c != range.end(); ++c) {
+      const MeshChunk& chunk = *chunks[c];
+      const int64_t shift = int64_t(first_provided[c]) - int64_t(first_vertex[c]);
+      for (std::size_t v = 0; v < chunk.vertices.size(); ++v) {
+        int64_t& index = remap[first_vertex[c] + v];
+        if (index < 0) continue;
+        index += shift;
+        mesh.vertices[std::size_t(index)] = chunk.vertices[v];
+        mesh.normals[std::size_t(index)] = chunk.normals[v];
+        if (with_intensity) mesh.intensities[std::size_t(index)] = chunk.intensities[v];
+      }
+    }
+  });
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 16), [&](const tbb::blocked_range<std::size_t>& range) {
+    for (std::size_t c = range.begin(); c != range.end(); ++c) {
+      const MeshChunk& chunk = *chunks[c];
+      const auto index = [&](int v) {
+        const int64_t own = remap[first_vertex[c] + std::size_t(v)];
+        return int(own >= 0 ? own : remap[std::size_t(-1 - own)]);  // a provider's entry is never negative
+      };
+      Eigen::Vector3i* out = mesh.triangles.data() + first_triangle[c];
+      for (const Eigen::Vector3i& triangle : chunk.triangles)
+        *out++ = Eigen::Vector3i(index(triangle[0]), index(triangle[1]), index(triangle[2]));
+    }
+  });
   return mesh;
 }
 
@@ -521,10 +709,14 @@ MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
   queue.reserve(state.pending.size());
   for (const auto& [key, since] : state.pending) queue.emplace_back(since, key);
   const bool budgeted = !remesh_all && (options_.update_budget_s > 0.0 || options_.max_blocks_per_update > 0);
+  // Without a budget by key alone: a block's +1 neighbours then follow it
+  // closely, and their voxels are still in cache when they are meshed.
   if (budgeted)
     std::sort(queue.begin(), queue.end(), [](const auto& a, const auto& b) {
       return a.first != b.first ? a.first < b.first : keyLess(a.second, b.second);
     });
+  else
+    std::sort(queue.begin(), queue.end(), [](const auto& a, const auto& b) { return keyLess(a.second, b.second); });
   std::size_t take = queue.size();
   if (budgeted && options_.max_blocks_per_update > 0) take = std::min(take, options_.max_blocks_per_update);
 

@@ -88,7 +88,7 @@ struct MeshChunk {
 MeshChunk meshBlock(const VoxelBlockGrid& grid, const VoxelBlock& block, const MeshOptions& options = {});
 
 // The whole grid as one mesh, vertices welded across block borders too
-// (a closed surface has no boundary edges). Blocks are meshed in parallel;
+// (a closed surface has no boundary edges). Blocks are meshed and welded in parallel;
 // the output order is deterministic (blocks sorted by key). Normals are one
 // per vertex, intensities too when the grid stores intensity (saved with
 // io::saveMeshFile).
