@@ -2,6 +2,9 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+
+#include <Eigen/Eigenvalues>
 
 #include <algorithm>
 #include <cmath>
@@ -41,6 +44,8 @@ LocalModel::LocalModel(LocalModelOptions options) : options_(options) {
   if (!(options_.keyframe_distance_m >= 0.0) || !(options_.keyframe_angle_rad >= 0.0) ||
       !std::isfinite(options_.keyframe_distance_m) || !std::isfinite(options_.keyframe_angle_rad))
     throw std::invalid_argument("local model: keyframe distance and angle must be finite and not negative");
+  if (!(options_.normal_radius_m >= 0.0) || !std::isfinite(options_.normal_radius_m))
+    throw std::invalid_argument("local model: normal_radius_m must be finite and not negative (0: off)");
 }
 
 void LocalModel::clear() { keyframes_.clear(); }
@@ -78,13 +83,123 @@ void LocalModel::add(const std::vector<VertexNormalMap>& levels, const Eigen::Is
     level.stride = map.stride;
     level.points.clear();
     level.normals.clear();
+    const bool model_normals = options_.normal_radius_m > 0.0;
     for (std::size_t i = 0; i < map.points.size(); ++i) {
-      if (!map.points[i].allFinite() || !map.normals[i].allFinite()) continue;
+      if (!map.points[i].allFinite() || (!model_normals && !map.normals[i].allFinite())) continue;
       level.points.push_back(map.points[i]);
       level.normals.push_back(map.normals[i]);
     }
   }
   keyframes_.push_back(std::move(keyframe));
+  if (options_.normal_radius_m > 0.0) computeModelNormals();
+}
+
+namespace {
+
+// Voxel coordinates packed into one key, z in the low bits (so a column of
+// voxels is a run of keys).
+constexpr int kVoxelBits = 21;
+constexpr int64_t kVoxelOffset = int64_t(1) << (kVoxelBits - 1);
+uint64_t voxelKey(int64_t x, int64_t y, int64_t z) {
+  const auto part = [](int64_t v) { return uint64_t(std::clamp<int64_t>(v + kVoxelOffset, 0, (int64_t(1) << kVoxelBits) - 1)); };
+  return (part(x) << (2 * kVoxelBits)) | (part(y) << kVoxelBits) | part(z);
+}
+
+// Of a voxel's points, at most this many (evenly spaced) enter a plane: a
+// voxel near a dense sensor holds thousands, and a few dozen over the
+// neighbourhood fix the plane as well.
+constexpr std::size_t kVoxelCap = 8;
+// A neighbourhood is a plane when its second axis spans at least kMinSpan
+// of the radius (more than one ring's line) and its thickness is at most
+// kMaxThickness of that span (not a crease, a kerb, a corner).
+constexpr double kMinSpan = 0.15, kMaxThickness = 0.3;
+
+}  // namespace
+
+void LocalModel::computeModelNormals() {
+  const float radius = float(options_.normal_radius_m);
+  Keyframe& newest = keyframes_.back();
+  const Eigen::Isometry3d newest_from_odom = newest.odom_from_lidar.inverse();
+  // The finest level's points of every keyframe, in the newest one's frame.
+  grid_points_.clear();
+  for (const Keyframe& keyframe : keyframes_) {
+    const Eigen::Isometry3f newest_from_keyframe = (newest_from_odom * keyframe.odom_from_lidar).cast<float>();
+    for (const Eigen::Vector3f& point : keyframe.levels.back().points)
+      grid_points_.push_back(newest_from_keyframe * point);
+  }
+  const float inverse_size = 1.0f / radius;
+  const auto voxelOf = [&](const Eigen::Vector3f& point) {
+    return Eigen::Vector3i(int(std::floor(point.x() * inverse_size)), int(std::floor(point.y() * inverse_size)),
+                           int(std::floor(point.z() * inverse_size)));
+  };
+  grid_order_.resize(grid_points_.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, grid_points_.size(), 8192),
+                    [&](const tbb::blocked_range<std::size_t>& block) {
+                      for (std::size_t i = block.begin(); i < block.end(); ++i) {
+                        const Eigen::Vector3i voxel = voxelOf(grid_points_[i]);
+                        grid_order_[i] = {voxelKey(voxel.x(), voxel.y(), voxel.z()), uint32_t(i)};
+                      }
+                    });
+  tbb::parallel_sort(grid_order_.begin(), grid_order_.end());
+  voxel_keys_.clear();
+  voxel_runs_.clear();
+  for (std::size_t i = 0; i < grid_order_.size(); ++i) {
+    if (i == 0 || grid_order_[i].first != grid_order_[i - 1].first) {
+      voxel_keys_.push_back(grid_order_[i].first);
+      voxel_runs_.push_back({uint32_t(i), uint32_t(i)});
+    }
+    voxel_runs_.back().second = uint32_t(i + 1);
+  }
+  const float radius_squared = radius * radius;
+  const double min_span_squared = (kMinSpan * radius) * (kMinSpan * radius);
+  const double max_thickness_squared = kMaxThickness * kMaxThickness;
+  const auto normalAt = [&](const Eigen::Vector3f& centre) -> Eigen::Vector3f {
+    constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+    const Eigen::Vector3i voxel = voxelOf(centre);
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();
+    int count = 0;
+    for (int dx = -1; dx <= 1; ++dx)
+      for (int dy = -1; dy <= 1; ++dy) {
+        const uint64_t first = voxelKey(voxel.x() + dx, voxel.y() + dy, voxel.z() - 1);
+        for (auto key = std::lower_bound(voxel_keys_.begin(), voxel_keys_.end(), first);
+             key != voxel_keys_.end() && *key <= first + 2; ++key) {
+          const auto [begin, end] = voxel_runs_[std::size_t(key - voxel_keys_.begin())];
+          // A dense voxel (near the sensor) sampled evenly down to the cap.
+          const uint32_t step = std::max<uint32_t>(1, uint32_t((end - begin + kVoxelCap - 1) / kVoxelCap));
+          for (uint32_t k = begin; k < end; k += step) {
+            const Eigen::Vector3f d = grid_points_[grid_order_[k].second] - centre;
+            if (d.squaredNorm() > radius_squared) continue;
+            const Eigen::Vector3d e = d.cast<double>();
+            sum += e;
+            outer.noalias() += e * e.transpose();
+            ++count;
+          }
+        }
+      }
+    if (count < 6) return Eigen::Vector3f::Constant(kNaN);
+    const Eigen::Vector3d mean = sum / count;
+    const Eigen::Matrix3d covariance = outer / count - mean * mean.transpose();
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
+    solver.computeDirect(covariance);
+    const Eigen::Vector3d eigenvalues = solver.eigenvalues();  // ascending
+    // A plane: spread in two directions (not one ring's line) and thin.
+    if (!(eigenvalues(1) >= min_span_squared) || !(eigenvalues(0) <= max_thickness_squared * eigenvalues(1)))
+      return Eigen::Vector3f::Constant(kNaN);
+    Eigen::Vector3f normal = solver.eigenvectors().col(0).cast<float>().normalized();
+    if (!normal.allFinite()) return Eigen::Vector3f::Constant(kNaN);
+    return normal.dot(centre) > 0.0f ? Eigen::Vector3f(-normal) : normal;  // facing the sensor
+  };
+  for (Level& level : newest.levels)
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, level.points.size(), 1024),
+                      [&](const tbb::blocked_range<std::size_t>& block) {
+                        for (std::size_t i = block.begin(); i < block.end(); ++i) {
+                          // Where the model has no plane (a far wall's rings a metre
+                          // apart), the keyframe's own normal, if any, stays.
+                          const Eigen::Vector3f normal = normalAt(level.points[i]);
+                          if (normal.allFinite()) level.normals[i] = normal;
+                        }
+                      });
 }
 
 void LocalModel::render(const LidarModel& model, const Eigen::Isometry3d& odom_from_view,
@@ -149,6 +264,13 @@ void LocalModel::render(const LidarModel& model, const Eigen::Isometry3d& odom_f
                           }
                         });
     }
+    // Points without a normal take part in the z-buffer (they occlude) but
+    // cannot win a pixel.
+    const auto has_normal = [&](std::size_t number) {
+      std::size_t k = 0;
+      while (number >= first_point_[k + 1]) ++k;
+      return std::isfinite(level_points_[k]->normals[number - first_point_[k]].x());
+    };
     // Pass 2: of the points on the nearest surface, the newest keyframe's.
     // The nearest point itself would be biased towards the sensor by the
     // noise: the least of several noisy ranges of one surface.
@@ -156,7 +278,7 @@ void LocalModel::render(const LidarModel& model, const Eigen::Isometry3d& odom_f
                       [&](const tbb::blocked_range<std::size_t>& block) {
                         for (std::size_t number = block.begin(); number < block.end(); ++number) {
                           const uint32_t pixel = pixel_of_point_[number];
-                          if (pixel == kNoPoint) continue;
+                          if (pixel == kNoPoint || !has_normal(number)) continue;
                           const float range = range_of_point_[number];
                           float front;
                           const uint32_t bits = __atomic_load_n(&nearest[pixel], __ATOMIC_RELAXED);
