@@ -105,10 +105,6 @@ uint64_t voxelKey(int64_t x, int64_t y, int64_t z) {
   return (part(x) << (2 * kVoxelBits)) | (part(y) << kVoxelBits) | part(z);
 }
 
-// Of a voxel's points, at most this many (evenly spaced) enter a plane: a
-// voxel near a dense sensor holds thousands, and a few dozen over the
-// neighbourhood fix the plane as well.
-constexpr std::size_t kVoxelCap = 8;
 // A neighbourhood is a plane when its second axis spans at least kMinSpan
 // of the radius (more than one ring's line) and its thickness is at most
 // kMaxThickness of that span (not a crease, a kerb, a corner).
@@ -116,8 +112,13 @@ constexpr double kMinSpan = 0.15, kMaxThickness = 0.3;
 
 }  // namespace
 
+// The neighbourhood of a point is the block of 3 x 3 x 3 voxels around its
+// voxel, 2 normal_radius_m wide: every point of a voxel shares it, so the
+// plane is fitted once per voxel, from the voxels' moments (count, mean,
+// scatter about the mean) joined by the parallel-axis theorem, instead of
+// once per point over its neighbours.
 void LocalModel::computeModelNormals() {
-  const float radius = float(options_.normal_radius_m);
+  const double voxel_size = 2.0 * options_.normal_radius_m / 3.0;
   Keyframe& newest = keyframes_.back();
   const Eigen::Isometry3d newest_from_odom = newest.odom_from_lidar.inverse();
   // The finest level's points of every keyframe, in the newest one's frame.
@@ -127,18 +128,16 @@ void LocalModel::computeModelNormals() {
     for (const Eigen::Vector3f& point : keyframe.levels.back().points)
       grid_points_.push_back(newest_from_keyframe * point);
   }
-  const float inverse_size = 1.0f / radius;
-  const auto voxelOf = [&](const Eigen::Vector3f& point) {
-    return Eigen::Vector3i(int(std::floor(point.x() * inverse_size)), int(std::floor(point.y() * inverse_size)),
-                           int(std::floor(point.z() * inverse_size)));
+  const float inverse_size = float(1.0 / voxel_size);
+  const auto keyOf = [&](const Eigen::Vector3f& point) {
+    return voxelKey(int64_t(std::floor(point.x() * inverse_size)), int64_t(std::floor(point.y() * inverse_size)),
+                    int64_t(std::floor(point.z() * inverse_size)));
   };
   grid_order_.resize(grid_points_.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, grid_points_.size(), 8192),
                     [&](const tbb::blocked_range<std::size_t>& block) {
-                      for (std::size_t i = block.begin(); i < block.end(); ++i) {
-                        const Eigen::Vector3i voxel = voxelOf(grid_points_[i]);
-                        grid_order_[i] = {voxelKey(voxel.x(), voxel.y(), voxel.z()), uint32_t(i)};
-                      }
+                      for (std::size_t i = block.begin(); i < block.end(); ++i)
+                        grid_order_[i] = {keyOf(grid_points_[i]), uint32_t(i)};
                     });
   tbb::parallel_sort(grid_order_.begin(), grid_order_.end());
   voxel_keys_.clear();
@@ -150,54 +149,81 @@ void LocalModel::computeModelNormals() {
     }
     voxel_runs_.back().second = uint32_t(i + 1);
   }
-  const float radius_squared = radius * radius;
-  const double min_span_squared = (kMinSpan * radius) * (kMinSpan * radius);
+  // Each voxel's moments, about its first point (float sums stay exact).
+  voxel_moments_.resize(voxel_keys_.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, voxel_keys_.size(), 1024),
+                    [&](const tbb::blocked_range<std::size_t>& block) {
+                      for (std::size_t v = block.begin(); v < block.end(); ++v) {
+                        const auto [begin, end] = voxel_runs_[v];
+                        const Eigen::Vector3d origin = grid_points_[grid_order_[begin].second].cast<double>();
+                        Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+                        Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();
+                        for (uint32_t k = begin; k < end; ++k) {
+                          const Eigen::Vector3d d = grid_points_[grid_order_[k].second].cast<double>() - origin;
+                          sum += d;
+                          outer.noalias() += d * d.transpose();
+                        }
+                        VoxelMoments& moments = voxel_moments_[v];
+                        moments.count = double(end - begin);
+                        moments.mean = origin + sum / moments.count;
+                        moments.scatter = outer - sum * sum.transpose() / moments.count;
+                      }
+                    });
+  // Each voxel's plane over its block.
+  const double min_span_squared = (kMinSpan * options_.normal_radius_m) * (kMinSpan * options_.normal_radius_m);
   const double max_thickness_squared = kMaxThickness * kMaxThickness;
-  const auto normalAt = [&](const Eigen::Vector3f& centre) -> Eigen::Vector3f {
-    constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
-    const Eigen::Vector3i voxel = voxelOf(centre);
-    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();
-    int count = 0;
-    for (int dx = -1; dx <= 1; ++dx)
-      for (int dy = -1; dy <= 1; ++dy) {
-        const uint64_t first = voxelKey(voxel.x() + dx, voxel.y() + dy, voxel.z() - 1);
-        for (auto key = std::lower_bound(voxel_keys_.begin(), voxel_keys_.end(), first);
-             key != voxel_keys_.end() && *key <= first + 2; ++key) {
-          const auto [begin, end] = voxel_runs_[std::size_t(key - voxel_keys_.begin())];
-          // A dense voxel (near the sensor) sampled evenly down to the cap.
-          const uint32_t step = std::max<uint32_t>(1, uint32_t((end - begin + kVoxelCap - 1) / kVoxelCap));
-          for (uint32_t k = begin; k < end; k += step) {
-            const Eigen::Vector3f d = grid_points_[grid_order_[k].second] - centre;
-            if (d.squaredNorm() > radius_squared) continue;
-            const Eigen::Vector3d e = d.cast<double>();
-            sum += e;
-            outer.noalias() += e * e.transpose();
-            ++count;
-          }
-        }
-      }
-    if (count < 6) return Eigen::Vector3f::Constant(kNaN);
-    const Eigen::Vector3d mean = sum / count;
-    const Eigen::Matrix3d covariance = outer / count - mean * mean.transpose();
-    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
-    solver.computeDirect(covariance);
-    const Eigen::Vector3d eigenvalues = solver.eigenvalues();  // ascending
-    // A plane: spread in two directions (not one ring's line) and thin.
-    if (!(eigenvalues(1) >= min_span_squared) || !(eigenvalues(0) <= max_thickness_squared * eigenvalues(1)))
-      return Eigen::Vector3f::Constant(kNaN);
-    Eigen::Vector3f normal = solver.eigenvectors().col(0).cast<float>().normalized();
-    if (!normal.allFinite()) return Eigen::Vector3f::Constant(kNaN);
-    return normal.dot(centre) > 0.0f ? Eigen::Vector3f(-normal) : normal;  // facing the sensor
-  };
+  constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+  voxel_normals_.resize(voxel_keys_.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, voxel_keys_.size(), 256),
+                    [&](const tbb::blocked_range<std::size_t>& block) {
+                      for (std::size_t v = block.begin(); v < block.end(); ++v) {
+                        const uint64_t key = voxel_keys_[v];
+                        const VoxelMoments& centre = voxel_moments_[v];
+                        // The block's moments about the centre voxel's mean.
+                        double count = 0.0;
+                        Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+                        Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+                        for (int dx = -1; dx <= 1; ++dx)
+                          for (int dy = -1; dy <= 1; ++dy) {
+                            // z in the low bits: a column of three voxels is a run of keys.
+                            const uint64_t first = key + (uint64_t(int64_t(dx)) << (2 * kVoxelBits)) +
+                                                   (uint64_t(int64_t(dy)) << kVoxelBits) - 1;
+                            for (auto it = std::lower_bound(voxel_keys_.begin(), voxel_keys_.end(), first);
+                                 it != voxel_keys_.end() && *it <= first + 2; ++it) {
+                              const VoxelMoments& other = voxel_moments_[std::size_t(it - voxel_keys_.begin())];
+                              const Eigen::Vector3d offset = other.mean - centre.mean;
+                              count += other.count;
+                              sum += other.count * offset;
+                              scatter += other.scatter + other.count * offset * offset.transpose();
+                            }
+                          }
+                        voxel_normals_[v] = Eigen::Vector3f::Constant(kNaN);
+                        if (count < 6.0) continue;
+                        const Eigen::Vector3d mean = sum / count;
+                        const Eigen::Matrix3d covariance = scatter / count - mean * mean.transpose();
+                        Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
+                        solver.computeDirect(covariance);
+                        const Eigen::Vector3d eigenvalues = solver.eigenvalues();  // ascending
+                        // A plane: spread in two directions (not one ring's line) and thin.
+                        if (!(eigenvalues(1) >= min_span_squared) ||
+                            !(eigenvalues(0) <= max_thickness_squared * eigenvalues(1)))
+                          continue;
+                        const Eigen::Vector3f normal = solver.eigenvectors().col(0).cast<float>().normalized();
+                        if (normal.allFinite()) voxel_normals_[v] = normal;
+                      }
+                    });
+  // Where the model has no plane (a far wall's rings a metre apart), the
+  // keyframe's own normal, if any, stays.
   for (Level& level : newest.levels)
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, level.points.size(), 1024),
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, level.points.size(), 4096),
                       [&](const tbb::blocked_range<std::size_t>& block) {
                         for (std::size_t i = block.begin(); i < block.end(); ++i) {
-                          // Where the model has no plane (a far wall's rings a metre
-                          // apart), the keyframe's own normal, if any, stays.
-                          const Eigen::Vector3f normal = normalAt(level.points[i]);
-                          if (normal.allFinite()) level.normals[i] = normal;
+                          const Eigen::Vector3f& point = level.points[i];
+                          const auto it = std::lower_bound(voxel_keys_.begin(), voxel_keys_.end(), keyOf(point));
+                          if (it == voxel_keys_.end() || *it != keyOf(point)) continue;
+                          const Eigen::Vector3f& normal = voxel_normals_[std::size_t(it - voxel_keys_.begin())];
+                          if (normal.allFinite())
+                            level.normals[i] = normal.dot(point) > 0.0f ? Eigen::Vector3f(-normal) : normal;
                         }
                       });
 }

@@ -87,6 +87,13 @@ class LocalModel {
   std::vector<std::pair<uint64_t, uint32_t>> grid_order_;
   std::vector<std::pair<uint32_t, uint32_t>> voxel_runs_;
   std::vector<uint64_t> voxel_keys_;
+  struct VoxelMoments {
+    double count;
+    Eigen::Vector3d mean;
+    Eigen::Matrix3d scatter;  // sum of (p - mean)(p - mean)^T
+  };
+  std::vector<VoxelMoments> voxel_moments_;
+  std::vector<Eigen::Vector3f> voxel_normals_;  // NaN where the block is no plane
   // Per level pixel: the nearest range's bits, then the winning point's
   // number (atomic compare-and-swap minimums); per point its pixel and range.
   mutable std::vector<std::vector<uint32_t>> nearest_, winner_;
