@@ -60,7 +60,8 @@ class LocalModel {
   // one map of rows/stride x columns/stride pixels (as levelPixelIndex files
   // them) with the nearest point of that level projecting there and its
   // normal, in the view's lidar frame; NaN where nothing projects. Of the
-  // points on a pixel's nearest surface, the newest keyframe's wins.
+  // points on a pixel's nearest surface, the newest keyframe's with a normal
+  // wins (points without one only occlude).
   // Parallel (TBB) and deterministic.
   void render(const LidarModel& model, const Eigen::Isometry3d& odom_from_view, std::vector<VertexNormalMap>& levels) const;
 
