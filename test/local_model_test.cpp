@@ -52,7 +52,9 @@ std::size_t validPixels(const VertexNormalMap& map) {
 TEST(LocalModel, AKeyframeRenderedAtItsOwnPoseGivesBackItsPixels) {
   const std::vector<int> strides{4, 2, 1};
   const std::vector<VertexNormalMap> levels = pyramid(cylinderScan(10.0f), strides);
-  LocalModel model;
+  LocalModelOptions own_normals;
+  own_normals.normal_radius_m = 0.0;  // the keyframe's normals as given
+  LocalModel model(own_normals);
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
   pose.translate(Eigen::Vector3d(3.0, -2.0, 0.5)).rotate(Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitZ()));
   model.add(levels, pose, false);
@@ -119,6 +121,61 @@ TEST(LocalModel, DropsTheOldestKeyframeAndReplacesAProvisionalOne) {
   EXPECT_TRUE(model.newestPose().isApprox(pose));
   EXPECT_THROW(LocalModel(LocalModelOptions{0, 1.0, 0.0}), std::invalid_argument);
   EXPECT_THROW(LocalModel(LocalModelOptions{2, -1.0, 0.0}), std::invalid_argument);
+}
+
+// A sparse sensor (8 rows 4 deg apart) over a flat floor 1.5 m below it:
+// a ring's range changes by far more than the depth-jump test allows from
+// one row to the next, so each scan's own normal map has no floor normals.
+// Keyframes 0.4 m apart put their rings between each other's, and the
+// model's normals from the model's points find the floor.
+LidarModelConstPtr sparseSensor() {
+  static const LidarModelConstPtr model =
+      std::make_shared<const LidarModel>(LidarIntrinsics::synthetic(8, 512, 2.0 * kDegree, -26.0 * kDegree));
+  return model;
+}
+
+RangeImage floorScan() {
+  RangeImage image(sparseSensor());
+  for (int v = 0; v < image.rows(); ++v)
+    for (int u = 0; u < image.columns(); ++u) {
+      const Eigen::Vector3f direction = sparseSensor()->direction(u, v);
+      if (direction.z() < -0.01f) image.range[image.index(v, u)] = 1.5f / -direction.z();
+    }
+  return image;
+}
+
+std::size_t pixelsWithNormals(const VertexNormalMap& map) {
+  std::size_t count = 0;
+  for (const Eigen::Vector3f& normal : map.normals) count += normal.allFinite();
+  return count;
+}
+
+TEST(LocalModel, NormalsFromTheModelFindTheFloorBetweenASparseSensorsRings) {
+  const std::vector<int> strides{2, 1};
+  const std::vector<VertexNormalMap> levels = pyramid(floorScan(), strides);
+  ASSERT_EQ(pixelsWithNormals(levels[1]), 0u) << "the scan's own normal map should not find the floor";
+  LocalModelOptions own_normals{4, 0.0, 0.0, 0.0};
+  LocalModelOptions model_normals = own_normals;
+  model_normals.normal_radius_m = 1.0;
+  LocalModel own(own_normals), merged(model_normals);
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  for (int k = 0; k < 4; ++k) {
+    pose.translation().x() = 0.4 * k;
+    own.add(levels, pose, false);
+    merged.add(levels, pose, false);
+  }
+  std::vector<VertexNormalMap> rendered;
+  own.render(*sparseSensor(), pose, rendered);
+  EXPECT_EQ(pixelsWithNormals(rendered[1]), 0u);
+  merged.render(*sparseSensor(), pose, rendered);
+  ASSERT_EQ(rendered.size(), strides.size());
+  for (std::size_t l = 0; l < strides.size(); ++l) {
+    // Ahead of and behind the sensor the rings fill in; to the side they
+    // slide along themselves and stay one line each (no plane).
+    EXPECT_GT(pixelsWithNormals(rendered[l]), validPixels(levels[l]) / 5) << "stride " << strides[l];
+    for (const Eigen::Vector3f& normal : rendered[l].normals)
+      if (normal.allFinite()) EXPECT_GT(normal.z(), std::cos(0.5 * kDegree)) << normal.transpose();
+  }
 }
 
 // The path over io::forEachScan of a KITTI folder.

@@ -38,8 +38,20 @@ std::string seconds(double value) {
 
 }  // namespace
 
+namespace {
+
+// With normals from the model, the source's pixels without a normal of their
+// own (a sparse sensor's ground) pair with the model's planes.
+RegistrationOptions registrationOptions(const OdometryOptions& options) {
+  RegistrationOptions registration = options.registration;
+  if (options.model.normal_radius_m > 0.0) registration.pair_source_without_normals = true;
+  return registration;
+}
+
+}  // namespace
+
 LidarOdometry::LidarOdometry(OdometryOptions options)
-    : options_(std::move(options)), icp_(options_.registration), model_(options_.model) {
+    : options_(std::move(options)), icp_(registrationOptions(options_)), model_(options_.model) {
   if (!(options_.max_time_gap_s > 0.0))
     throw std::invalid_argument("odometry: max_time_gap_s must be positive, not " +
                                 std::to_string(options_.max_time_gap_s));
@@ -380,8 +392,11 @@ const VertexNormalMap& LidarOdometry::sourceWithoutMoving() {
       if (!marked(std::size_t(row) * columns + column)) continue;
       for (int r = std::max(0, row - kMovingGrowth); r <= std::min(rows - 1, row + kMovingGrowth); ++r)
         for (int c = column - kMovingGrowth; c <= column + kMovingGrowth; ++c)
-          source_.normals[std::size_t(r) * columns + std::size_t((c + columns) % columns)].setConstant(
-              std::numeric_limits<float>::quiet_NaN());
+        {
+          const std::size_t i = std::size_t(r) * columns + std::size_t((c + columns) % columns);
+          source_.points[i].setConstant(std::numeric_limits<float>::quiet_NaN());
+          source_.normals[i].setConstant(std::numeric_limits<float>::quiet_NaN());
+        }
     }
   return source_;
 }
@@ -468,8 +483,10 @@ void LidarOdometry::addKeyframe(const RangeImage& scan, bool deskewed) {
     const int s = map.stride;
     for (int row = 0; row < map.rows; ++row)
       for (int column = 0; column < map.columns; ++column)
-        if (moving_[std::size_t(row * s) * deskewed_.columns + std::size_t(column * s)])
+        if (moving_[std::size_t(row * s) * deskewed_.columns + std::size_t(column * s)]) {
+          map.points[std::size_t(row) * map.columns + column].setConstant(std::numeric_limits<float>::quiet_NaN());
           map.normals[std::size_t(row) * map.columns + column].setConstant(std::numeric_limits<float>::quiet_NaN());
+        }
   }
   model_.add(keyframe_levels_, pose_, provisional(scan));
 }

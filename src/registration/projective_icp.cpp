@@ -116,7 +116,8 @@ struct TargetArrays {
 // Association (paper eq. 5) of one chunk and its point-to-plane rows, branch
 // free over plain arrays so that it vectorises: the target look-ups become
 // gathers, a rejected point gets zero rows (paired is an integer mask; every
-// comparison is false for a NaN target normal). moved and source_normals are
+// comparison is false for a NaN target normal). A source point without a
+// normal has a zero one: m.n >= cos |m|^2 holds for it. moved and source_normals are
 // xyz triples. The rows must not overlap the inputs (restrict: gathers are
 // not vectorised past stores that may alias them). Cloned for AVX2. Returns
 // the number of pairs.
@@ -134,7 +135,7 @@ std::size_t pairRows(const float* moved, const float* source_normals, const Proj
     const float nx = target.normals[t], ny = target.normals[t + 1], nz = target.normals[t + 2];
     const float dx = p[0] - target.points[t], dy = p[1] - target.points[t + 1], dz = p[2] - target.points[t + 2];
     const int paired = hit & int(dx * dx + dy * dy + dz * dz <= max_distance_squared) &
-                       int(m[0] * nx + m[1] * ny + m[2] * nz >= min_cosine);
+                       int(m[0] * nx + m[1] * ny + m[2] * nz >= min_cosine * (m[0] * m[0] + m[1] * m[1] + m[2] * m[2]));
     rows[0][k] = zeroUnless(p[1] * nz - p[2] * ny, paired);  // p x n
     rows[1][k] = zeroUnless(p[2] * nx - p[0] * nz, paired);
     rows[2][k] = zeroUnless(p[0] * ny - p[1] * nx, paired);
@@ -438,7 +439,8 @@ void ProjectiveIcp::prepareSource(const VertexNormalMap& source) const {
     const int step = std::max(1, options_.strides[level] / source.stride) * options_.source_stride;
     const int rows = (source.rows + step - 1) / step;
     const auto usable = [&](std::size_t i) {
-      return std::isfinite(source.normals[i].x()) && std::isfinite(source.points[i].x());
+      return (options_.pair_source_without_normals || std::isfinite(source.normals[i].x())) &&
+             std::isfinite(source.points[i].x());
     };
     // Two parallel passes over the kept rows: how many pixels each keeps,
     // then each row's pixels copied to its offset (the same order as one
@@ -465,7 +467,8 @@ void ProjectiveIcp::prepareSource(const VertexNormalMap& source) const {
           const std::size_t i = first + column;
           if (!usable(i)) continue;
           kept.points[out] = source.points[i];
-          kept.normals[out] = source.normals[i];
+          // No normal: zero, which passes the agreement check in pairRows.
+          kept.normals[out] = std::isfinite(source.normals[i].x()) ? source.normals[i] : Eigen::Vector3f::Zero();
           kept.columns[out] = column * source.stride;
           ++out;
         }

@@ -293,6 +293,8 @@ OdometryParameters readOdometryParameters(const ros::NodeHandle& private_node) {
   odometry.model.keyframe_angle_rad =
       reader.getDouble("keyframe_angle_deg", odometry_defaults.model.keyframe_angle_rad * 180.0 / M_PI, 0.0, 180.0) *
       M_PI / 180.0;
+  odometry.model.normal_radius_m =
+      reader.getDouble("model_normal_radius", odometry_defaults.model.normal_radius_m, 0.0, 100.0);
   odometry.max_time_gap_s = reader.getDouble("max_time_gap", odometry_defaults.max_time_gap_s, 1e-3, 3600.0);
   odometry.moving_margin_m = reader.getDouble("moving_margin", odometry_defaults.moving_margin_m, 0.0, 100.0);
   odometry.moving_warning_share =

@@ -46,6 +46,7 @@ registration::OdometryOptions OdometryCommandLine::options() const {
   options.registration.area_weight_max_range_m = area_weight_max_range_m;
   options.model.keyframe_distance_m = keyframe_distance_m;
   options.model.keyframe_angle_rad = keyframe_angle_deg * M_PI / 180.0;
+  options.model.normal_radius_m = model_normal_radius_m;
   return options;
 }
 
@@ -60,6 +61,7 @@ Json::Value OdometryCommandLine::json() const {
   json["area_weight_max_range_m"] = area_weight_max_range_m;
   json["keyframe_distance_m"] = keyframe_distance_m;
   json["keyframe_angle_deg"] = keyframe_angle_deg;
+  json["model_normal_radius_m"] = model_normal_radius_m;
   return json;
 }
 
@@ -117,6 +119,11 @@ void addOdometryOptions(Command& command, OdometryCommandLine& odometry) {
       .showDefault()
       .check(nonNegative());
   command.option("--keyframe-angle", odometry.keyframe_angle_deg, "... or after this rotation, degrees (0: off)")
+      .showDefault()
+      .check(nonNegative());
+  command.option("--model-normal-radius", odometry.model_normal_radius_m,
+                 "the local model's normals from its keyframes' points within this radius, m (0: each "
+                 "keyframe's own, from its scan's neighbouring pixels)")
       .showDefault()
       .check(nonNegative());
 }

@@ -46,6 +46,7 @@ struct OdometryCommandLine {
   int model_keyframes = int(registration::LocalModelOptions().keyframes);
   double keyframe_distance_m = registration::LocalModelOptions().keyframe_distance_m;
   double keyframe_angle_deg = registration::LocalModelOptions().keyframe_angle_rad * 180.0 / M_PI;
+  double model_normal_radius_m = registration::LocalModelOptions().normal_radius_m;
   registration::OdometryOptions options() const;
   Json::Value json() const;
 };

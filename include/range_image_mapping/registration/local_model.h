@@ -25,6 +25,14 @@ struct LocalModelOptions {
   // every scan does).
   double keyframe_distance_m = 0.5;
   double keyframe_angle_rad = 5.0 * M_PI / 180.0;
+  // Normals of the model from the model itself: each new keyframe's points
+  // get the plane of the model's points (its own and the older keyframes')
+  // within this radius, so that on a sparse sensor the rings of keyframes
+  // taken from other positions fill between its own; where they make no
+  // plane, the keyframe's own normal stays. 0: each keyframe keeps the
+  // normals computed on its own scan (chords across its beam rows, biased
+  // on sparse sensors: issue 14).
+  double normal_radius_m = 1.0;
 };
 
 class LocalModel {
@@ -52,7 +60,8 @@ class LocalModel {
   // one map of rows/stride x columns/stride pixels (as levelPixelIndex files
   // them) with the nearest point of that level projecting there and its
   // normal, in the view's lidar frame; NaN where nothing projects. Of the
-  // points on a pixel's nearest surface, the newest keyframe's wins.
+  // points on a pixel's nearest surface, the newest keyframe's with a normal
+  // wins (points without one only occlude).
   // Parallel (TBB) and deterministic.
   void render(const LidarModel& model, const Eigen::Isometry3d& odom_from_view, std::vector<VertexNormalMap>& levels) const;
 
@@ -61,15 +70,31 @@ class LocalModel {
  private:
   struct Level {
     int stride = 1;
-    std::vector<Eigen::Vector3f> points, normals;  // valid pixels with normals only
+    std::vector<Eigen::Vector3f> points, normals;  // valid pixels; normals NaN where none
   };
   struct Keyframe {
     Eigen::Isometry3d odom_from_lidar;
     std::vector<Level> levels;
     bool provisional = false;
   };
+  // normal_radius_m > 0: the newest keyframe's normals from the model's points.
+  void computeModelNormals();
+
   LocalModelOptions options_;
   std::deque<Keyframe> keyframes_;
+  // computeModelNormals: the finest level's points of every keyframe in the
+  // newest one's frame, sorted by voxel, and each voxel's run of them.
+  std::vector<Eigen::Vector3f> grid_points_;
+  std::vector<std::pair<uint64_t, uint32_t>> grid_order_;
+  std::vector<std::pair<uint32_t, uint32_t>> voxel_runs_;
+  std::vector<uint64_t> voxel_keys_;
+  struct VoxelMoments {
+    double count;
+    Eigen::Vector3d mean;
+    Eigen::Matrix3d scatter;  // sum of (p - mean)(p - mean)^T
+  };
+  std::vector<VoxelMoments> voxel_moments_;
+  std::vector<Eigen::Vector3f> voxel_normals_;  // NaN where the block is no plane
   // Per level pixel: the nearest range's bits, then the winning point's
   // number (atomic compare-and-swap minimums); per point its pixel and range.
   mutable std::vector<std::vector<uint32_t>> nearest_, winner_;

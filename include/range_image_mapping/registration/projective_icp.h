@@ -38,6 +38,12 @@ struct RegistrationOptions {
   // metres apart), the fine ones reject outliers.
   bool gate_grows_with_stride = true;
   double min_normal_cosine = 0.8;           // source and target normals must agree
+  // Source pixels without a normal of their own are paired too (the pair's
+  // plane is the target's; the normals' agreement is checked where the
+  // source has one): on a sparse sensor the ground's pixels fail the
+  // source's depth-jump test, and the target's normals come from a model
+  // that has a plane there (LocalModelOptions::normal_radius_m).
+  bool pair_source_without_normals = false;
   // Pairs are weighted by the area their pixel covers, range^2 up to this
   // range (and equally beyond it): the static world, far and wide, then
   // outweighs a near object that fills many pixels. 0: every pair alike.
@@ -102,7 +108,8 @@ class ProjectiveIcp {
   void setTarget(const LidarModelConstPtr& model, std::vector<VertexNormalMap>& levels);
   const VertexNormalMap& targetLevel(std::size_t level) const { return target_levels_.at(level); }
   // Source points in their own lidar frame (e.g. deskewed), with normals;
-  // pixels without a normal are not used. At level s the source is read every
+  // pixels without a normal are not used (unless
+  // pair_source_without_normals). At level s the source is read every
   // s * source_stride pixels. Throws std::runtime_error without a target,
   // std::invalid_argument for a non-finite initial pose. Levels before
   // first_level are skipped (a refinement from an already close pose).
