@@ -15,6 +15,15 @@ namespace {
 
 constexpr uint32_t kNoRange = std::numeric_limits<uint32_t>::max();
 constexpr uint32_t kNoPoint = std::numeric_limits<uint32_t>::max();
+constexpr uint32_t kNoTwin = std::numeric_limits<uint32_t>::max();
+
+// The level of stride 1, or `count` when there is none.
+template <typename Levels>
+std::size_t finestLevel(const Levels& levels, std::size_t count) {
+  for (std::size_t l = 0; l < count; ++l)
+    if (levels[l].stride == 1) return l;
+  return count;
+}
 // Returns of one surface lie within this of its nearest one (noise, the
 // spread of a pixel's footprint on slanted surfaces).
 constexpr float kSurfaceThickness_m = 0.1f;
@@ -72,14 +81,34 @@ void LocalModel::add(const std::vector<VertexNormalMap>& levels, const Eigen::Is
   keyframe.odom_from_lidar = odom_from_lidar;
   keyframe.provisional = provisional;
   keyframe.levels.resize(levels.size());
-  for (std::size_t l = 0; l < levels.size(); ++l) {
+  // The finest level first: the coarser ones look up their points' twins in it.
+  const std::size_t finest = finestLevel(levels, levels.size());
+  for (std::size_t n = 0; n < levels.size(); ++n) {
+    const std::size_t l = finest < levels.size() ? (n == 0 ? finest : n - (n <= finest)) : n;
     const VertexNormalMap& map = levels[l];
     Level& level = keyframe.levels[l];
     level.stride = map.stride;
     level.points.clear();
     level.normals.clear();
+    level.finest_twin.clear();
+    if (l == finest) finest_number_of_pixel_.assign(map.points.size(), kNoTwin);
+    const bool twins = finest < levels.size() && l != finest;
     for (std::size_t i = 0; i < map.points.size(); ++i) {
       if (!map.points[i].allFinite() || !map.normals[i].allFinite()) continue;
+      if (l == finest) finest_number_of_pixel_[i] = uint32_t(level.points.size());
+      if (twins) {
+        // Level pixel (r, c) is full-resolution pixel (s r, s c).
+        const VertexNormalMap& full = levels[finest];
+        const std::size_t row = i / std::size_t(map.columns), column = i % std::size_t(map.columns);
+        const std::size_t full_row = row * map.stride, full_column = column * map.stride;
+        uint32_t twin = kNoTwin;
+        if (full_row < std::size_t(full.rows) && full_column < std::size_t(full.columns)) {
+          twin = finest_number_of_pixel_[full_row * full.columns + full_column];
+          // Only the very same point (coordinates to the bit) shares a projection.
+          if (twin != kNoTwin && !(keyframe.levels[finest].points[twin] == map.points[i])) twin = kNoTwin;
+        }
+        level.finest_twin.push_back(twin);
+      }
       level.points.push_back(map.points[i]);
       level.normals.push_back(map.normals[i]);
     }
@@ -100,7 +129,15 @@ void LocalModel::render(const LidarModel& model, const Eigen::Isometry3d& odom_f
     view_from_keyframe_[k] = (view_from_odom * keyframes_[keyframes_.size() - 1 - k].odom_from_lidar).cast<float>();
   const auto keyframe = [&](std::size_t k) -> const Keyframe& { return keyframes_[keyframes_.size() - 1 - k]; };
   constexpr std::size_t kChunk = 2048;
-  for (std::size_t l = 0; l < level_count; ++l) {
+  // The finest level first: its projections serve the coarser levels' twins.
+  const std::size_t finest = keyframes_.empty() ? 0 : finestLevel(keyframes_.back().levels, level_count);
+  finest_pixels_.resize(keyframes_.size());
+  finest_hits_.resize(keyframes_.size());
+  level_pixels_.resize(keyframes_.size());
+  level_hits_.resize(keyframes_.size());
+  for (std::size_t n = 0; n < level_count; ++n) {
+    const std::size_t l = finest < level_count ? (n == 0 ? finest : n - (n <= finest)) : n;
+    const bool twins = finest < level_count && l != finest;
     const int s = keyframes_.back().levels[l].stride;
     VertexNormalMap& level = levels[l];
     level.stride = s;
@@ -124,20 +161,46 @@ void LocalModel::render(const LidarModel& model, const Eigen::Isometry3d& odom_f
     for (std::size_t k = 0; k < keyframes_.size(); ++k) level_points_[k] = &keyframe(k).levels[l];
 
     // Pass 1: every point's pixel and range, and each pixel's nearest range.
+    // A coarser level's point with a twin in the finest level takes the
+    // twin's projection (the same point, the same pixel) instead of its own.
     for (std::size_t k = 0; k < keyframes_.size(); ++k) {
       const Level& points = keyframe(k).levels[l];
+      const bool has_twins = twins && points.finest_twin.size() == points.points.size();
       const Eigen::Isometry3f& view_from_keyframe = view_from_keyframe_[k];
       const std::size_t first = first_point_[k];
+      std::vector<ProjectedPixel>& pixels = l == finest ? finest_pixels_[k] : level_pixels_[k];
+      std::vector<uint8_t>& hits = l == finest ? finest_hits_[k] : level_hits_[k];
+      pixels.resize(points.points.size());
+      hits.resize(points.points.size());
       tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.points.size(), kChunk),
                         [&](const tbb::blocked_range<std::size_t>& block) {
                           Eigen::Vector3f moved[kChunk];
-                          ProjectedPixel pixels[kChunk];
-                          uint8_t hits[kChunk];
-                          const std::size_t n = block.size();
-                          for (std::size_t i = 0; i < n; ++i) moved[i] = view_from_keyframe * points.points[block.begin() + i];
-                          model.projectMany(moved, n, pixels, hits);
-                          for (std::size_t i = 0; i < n; ++i) {
-                            const std::size_t number = first + block.begin() + i;
+                          const std::size_t n = block.size(), begin = block.begin();
+                          if (!has_twins) {
+                            for (std::size_t i = 0; i < n; ++i) moved[i] = view_from_keyframe * points.points[begin + i];
+                            model.projectMany(moved, n, &pixels[begin], &hits[begin]);
+                          } else {
+                            std::size_t own[kChunk], count = 0;
+                            for (std::size_t i = begin; i < block.end(); ++i) {
+                              const uint32_t twin = points.finest_twin[i];
+                              if (twin != kNoTwin) {
+                                pixels[i] = finest_pixels_[k][twin];
+                                hits[i] = finest_hits_[k][twin];
+                              } else {
+                                moved[count] = view_from_keyframe * points.points[i];
+                                own[count++] = i;
+                              }
+                            }
+                            ProjectedPixel projected[kChunk];
+                            uint8_t projected_hits[kChunk];
+                            if (count > 0) model.projectMany(moved, count, projected, projected_hits);
+                            for (std::size_t j = 0; j < count; ++j) {
+                              pixels[own[j]] = projected[j];
+                              hits[own[j]] = projected_hits[j];
+                            }
+                          }
+                          for (std::size_t i = begin; i < block.end(); ++i) {
+                            const std::size_t number = first + i;
                             if (!hits[i]) {
                               pixel_of_point_[number] = kNoPoint;
                               continue;

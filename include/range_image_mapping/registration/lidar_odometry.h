@@ -185,6 +185,7 @@ class LidarOdometry {
   std::vector<uint8_t> moving_;
   std::vector<uint8_t> stale_;  // behind the model's surface now and in the last scan (see moving_margin_m)
   std::vector<uint8_t> behind_model_;  // the last classified scan's pixels behind the model's surface
+  std::vector<ProjectedPixel> projected_;  // classifyMoving: the scan's pixels in the model
   VertexNormalMap source_;  // measured_ without the last scan's moving and stale pixels
   const VertexNormalMap& sourceWithoutMoving();
   RangeImage staggered_;  // destaggered input, re-staggered

@@ -62,6 +62,11 @@ class LocalModel {
   struct Level {
     int stride = 1;
     std::vector<Eigen::Vector3f> points, normals;  // valid pixels with normals only
+    // A coarser level's pixel (s i, s j) is the same point as the finest
+    // level's pixel there: per point, that twin's number in the finest
+    // level (kNoTwin where the finest has no normal there), so that the
+    // render projects it once for every level.
+    std::vector<uint32_t> finest_twin;
   };
   struct Keyframe {
     Eigen::Isometry3d odom_from_lidar;
@@ -79,6 +84,11 @@ class LocalModel {
   mutable std::vector<Eigen::Isometry3f> view_from_keyframe_;  // the same order
   mutable std::vector<const Level*> level_points_;  // the same order, of the level rendered
   mutable LevelPixelTables pixel_tables_;  // of the level rendered
+  // Per keyframe (render order), its points of the level rendered projected
+  // (hit flags apart); the finest level's are kept for the coarser ones.
+  mutable std::vector<std::vector<ProjectedPixel>> level_pixels_, finest_pixels_;
+  mutable std::vector<std::vector<uint8_t>> level_hits_, finest_hits_;
+  std::vector<uint32_t> finest_number_of_pixel_;  // add(): the finest level's point number per pixel
 };
 
 }  // namespace range_image_mapping::registration
