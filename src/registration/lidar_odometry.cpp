@@ -414,16 +414,19 @@ std::size_t LidarOdometry::classifyMoving(const LidarModel& model, const Eigen::
   constexpr float kStaleNormalCosine = 0.9f;
   const std::size_t size = deskewed_.points.size();
   constexpr std::size_t kChunk = 1024;
+  // Pixels in a reused buffer: a ProjectedPixel array on the stack is
+  // zeroed on every chunk.
+  projected_.resize(size);
   const std::size_t moving = tbb::parallel_reduce(
       tbb::blocked_range<std::size_t>(0, size, kChunk), std::size_t(0),
       [&](const tbb::blocked_range<std::size_t>& block, std::size_t count) {
         // Projected in chunks (projectMany): several times faster than one by one.
         Eigen::Vector3f points[kChunk];
         std::size_t pixel_of[kChunk];
-        ProjectedPixel pixels[kChunk];
         uint8_t hits[kChunk];
         for (std::size_t first = block.begin(); first < block.end(); first += kChunk) {
           const std::size_t end = std::min(block.end(), first + kChunk);
+          ProjectedPixel* pixels = &projected_[first];
           std::size_t n = 0;
           for (std::size_t i = first; i < end; ++i) {
             if (!deskewed_.normals[i].allFinite()) continue;

@@ -30,9 +30,11 @@ struct OdometryOptions {
   // settle in 4-7 passes (fast handheld motion up to 13); 3 already gives
   // the converged poses on the simulated presets.
   int deskew_passes = 10;
-  // ... "no longer moves": a step below these.
-  double deskew_convergence_rad = 1e-5;
-  double deskew_convergence_m = 1e-4;
+  // ... "no longer moves": a step below these. Each pass shrinks the step
+  // about threefold, so what is left is a fraction of them, far below the
+  // drift; every finest step costs a full-resolution pass over the scan.
+  double deskew_convergence_rad = 2e-5;
+  double deskew_convergence_m = 2e-4;
   // Degenerate when the hessian's condition number exceeds this or fewer pairs
   // than min_inliers remain: the motion prior is used instead, and reported.
   double max_condition_number = 1e6;
@@ -185,6 +187,7 @@ class LidarOdometry {
   std::vector<uint8_t> moving_;
   std::vector<uint8_t> stale_;  // behind the model's surface now and in the last scan (see moving_margin_m)
   std::vector<uint8_t> behind_model_;  // the last classified scan's pixels behind the model's surface
+  std::vector<ProjectedPixel> projected_;  // classifyMoving: the scan's pixels in the model
   VertexNormalMap source_;  // measured_ without the last scan's moving and stale pixels
   const VertexNormalMap& sourceWithoutMoving();
   RangeImage staggered_;  // destaggered input, re-staggered
