@@ -11,7 +11,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <iterator>
 #include <limits>
 #include <optional>
 
@@ -375,43 +374,40 @@ std::vector<int> rowsByAltitude(const LidarIntrinsics& intrinsics) {
   return by_altitude;
 }
 
-// Pi of a block's selected voxels into the moving sensor: each voxel as the
-// sensor saw it when the column that measured it fired (the fixed point
-// above, for every voxel). The voxels of a cell are first projected as the
-// cell centre's column saw them: that gives each voxel's own column, stagger
-// included, up to the little motion between the two columns (a cell spans
-// fewer columns than a block, so fewer voxels need another projection).
-// Voxels whose column was measured too far in time from the motion used are
-// moved again with their own column's. Voxels that do not settle lie where
-// the sweep's start and end overlap or leave a gap (the seam): they miss
-// this scan rather than being averaged with the wrong sensor position.
-void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion, const ActivationCells& cells,
-                             const Eigen::Vector3f& first, const Eigen::Matrix3f& lattice_steps, std::size_t count,
+// Pi of a block's voxels into the moving sensor: each voxel as the sensor
+// saw it when the column that measured it fired (the fixed point above, for
+// every voxel). All voxels are first projected as the block centre's column
+// saw them (the block's lattice moved once, no motion per voxel): that gives
+// each voxel's own column, stagger included, up to the little motion between
+// the two columns. Voxels whose column was measured too far in time from the
+// motion used are moved again with their own column's. Voxels that do not
+// settle lie where the sweep's start and end overlap or leave a gap (the
+// seam): they miss this scan rather than being averaged with the wrong
+// sensor position.
+// Works on the block's selected voxels (buffers.lattice, count of them).
+void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion, const Eigen::Vector3f& first,
+                             const Eigen::Matrix3f& lattice_steps, int edge, std::size_t count,
                              BlockBuffers& buffers) {
-  constexpr int kUnknown = -2;  // -1: the cell centre is outside the field of view
-  int cell_column[64];
-  std::fill(std::begin(cell_column), std::end(cell_column), kUnknown);
-  const int cell_voxels = cells.cell_voxels, cells_per_edge = cells.cells_per_edge;
-  const Eigen::Vector3f to_centre = Eigen::Vector3f::Constant(0.5f * float(cell_voxels - 1));
-  for (std::size_t i = 0; i < count; ++i) {
-    const Eigen::Vector3i cell = buffers.lattice[i].cast<int>() / cell_voxels;
-    int& column = cell_column[cell.x() + cells_per_edge * (cell.y() + cells_per_edge * cell.z())];
-    if (column == kUnknown)
-      column = columnSeenFromMovingSensor(
-          model, motion, first + lattice_steps * ((cell * cell_voxels).cast<float>() + to_centre));
-    buffers.motion_columns[i] = column;
-    // Outside the field of view: from the scan-time projection.
-    buffers.moved_points[i] = column >= 0 ? motion.toColumnFrame(column, buffers.points[i]) : buffers.points[i];
-  }
-  model.projectMany(buffers.moved_points.data(), count, buffers.pixels.data(), buffers.hits.data());
+  const Eigen::Vector3f block_centre = first + lattice_steps * Eigen::Vector3f::Constant(0.5f * float(edge - 1));
+  const int centre_column = columnSeenFromMovingSensor(model, motion, block_centre);
   std::size_t pending = 0;
-  for (std::size_t i = 0; i < count; ++i) {
-    // A miss here is a voxel off the vertical field of view by more than
-    // the sensor moved between the two columns: it is left out.
-    if (!buffers.hits[i]) continue;
-    buffers.frame_points[i] = buffers.moved_points[i];
-    if (buffers.motion_columns[i] < 0 || !motion.settled(buffers.motion_columns[i], buffers.pixels[i].column))
-      buffers.pending[pending++] = uint32_t(i);
+  if (centre_column >= 0) {
+    // The block's lattice in the centre column's frame.
+    const Eigen::Vector3f moved_first = motion.toColumnFrame(centre_column, first);
+    const Eigen::Matrix3f moved_steps = motion.inverse[centre_column].leftCols<3>() * lattice_steps;
+    for (std::size_t i = 0; i < count; ++i) buffers.moved_points[i] = moved_first + moved_steps * buffers.lattice[i];
+    model.projectMany(buffers.moved_points.data(), count, buffers.pixels.data(), buffers.hits.data());
+    for (std::size_t i = 0; i < count; ++i) {
+      // A miss here is a voxel off the vertical field of view by more than
+      // the sensor moved between the two columns: it is left out.
+      if (!buffers.hits[i]) continue;
+      buffers.frame_points[i] = buffers.moved_points[i];
+      if (!motion.settled(centre_column, buffers.pixels[i].column)) buffers.pending[pending++] = uint32_t(i);
+    }
+  } else {  // the centre is outside the field of view: start from the scan-time projection
+    model.projectMany(buffers.points.data(), count, buffers.pixels.data(), buffers.hits.data());
+    for (std::size_t i = 0; i < count; ++i)
+      if (buffers.hits[i]) buffers.pending[pending++] = uint32_t(i);
   }
   for (int pass = 0; pass < kMotionRefinements && pending > 0; ++pass) {
     for (std::size_t n = 0; n < pending; ++n) {
@@ -795,7 +791,7 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
             ++count;
           }
       if (moving) {
-        projectIntoMovingSensor(model, sweep_motion, cells, first, lattice_steps, count, buffers);
+        projectIntoMovingSensor(model, sweep_motion, first, lattice_steps, edge, count, buffers);
       } else {
         model.projectMany(buffers.points.data(), count, buffers.pixels.data(), buffers.hits.data());
       }
