@@ -338,7 +338,8 @@ TEST(TsdfIntegrator, GroundAtGrazingIncidenceIsCoveredByPointToPlaneDistances) {
     EXPECT_LT(filled.mean_error[ring], kVoxel / 100) << "ring " << ring;
     EXPECT_GT(noisy_filled.covered[ring], 0.97) << "ring " << ring;
     EXPECT_LT(noisy_filled.mean_error[ring], kVoxel / 20) << "ring " << ring;
-    EXPECT_LT(along_ray.covered[ring], 0.7) << "ring " << ring;
+    // (Free space activated in front of each band lets eq. 9 reach a little more of the ground.)
+    EXPECT_LT(along_ray.covered[ring], 0.75) << "ring " << ring;
     EXPECT_GT(plane.covered[ring], along_ray.covered[ring] + 0.1) << "ring " << ring;
     EXPECT_LT(plane.mean_error[ring], kVoxel / 100) << "ring " << ring;
   }
@@ -466,7 +467,8 @@ TEST(TsdfIntegrator, RangeClipBoundsWhatIsWritten) {
     farthest_voxel = std::max(farthest_voxel, (position - sensor).norm());
   });
   EXPECT_LE(farthest_block, 12.0 + truncation + beam_origin);
-  EXPECT_GE(nearest_block, 5.0 - truncation - beam_origin - grid.blockSize() * std::sqrt(3.0));
+  // Cells are activated 4 voxels in front of the band too (kFreeSpaceActivationVoxels).
+  EXPECT_GE(nearest_block, 5.0 - truncation - 4.0 * grid.voxelSize() - beam_origin - grid.blockSize() * std::sqrt(3.0));
   EXPECT_LE(farthest_voxel, 12.0 + truncation + beam_origin);
   EXPECT_GT(farthest_voxel, 11.0);
   EXPECT_LT(nearest_voxel, 6.0);
