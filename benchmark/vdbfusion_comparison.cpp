@@ -78,8 +78,8 @@ struct MeshScore {
 struct SystemRun {
   std::vector<double> integrate_wall_s, integrate_cpu_s;  // per scan
   std::vector<double> mesh_update_s;                      // per scan (ours)
-  // Ours, per scan: blocks integrated, voxels written, chunks re-meshed.
-  std::vector<double> blocks_touched, voxels_updated, chunks_rebuilt;
+  // Ours, per scan: blocks integrated, voxels projected and written, chunks re-meshed.
+  std::vector<double> blocks_touched, voxels_selected, voxels_updated, chunks_rebuilt;
   std::vector<MeshScore> meshes;
 };
 
@@ -112,6 +112,7 @@ SystemRun runOurs(const test::MappingPreset& preset, const test::SimulatedMappin
     run.integrate_wall_s.push_back(integration.wall());
     run.integrate_cpu_s.push_back(integration.cpu());
     run.blocks_touched.push_back(double(statistics.blocks_touched));
+    run.voxels_selected.push_back(double(statistics.voxels_selected));
     run.voxels_updated.push_back(double(statistics.voxels_updated));
     const Timer meshing;
     const mapping::MeshUpdate update = extractor.update(grid);
@@ -253,15 +254,13 @@ int run(int argc, char** argv) {
                 "F@3");
     const SystemRun ours = runOurs(preset, sequence);
     printRun(preset.name, options.threads, ours);
-    std::printf("%s: rim per scan: %.0f blocks integrated (%.0f voxels each), %.0f voxels written (%.0f %%), "
-                "%.0f chunks re-meshed\n",
-                preset.name.c_str(), mean(ours.blocks_touched), double(mapping::VoxelBlockGridOptions{}.block_edge) *
-                                                                    mapping::VoxelBlockGridOptions{}.block_edge *
-                                                                    mapping::VoxelBlockGridOptions{}.block_edge,
-                mean(ours.voxels_updated),
-                100.0 * mean(ours.voxels_updated) /
-                    (mean(ours.blocks_touched) * std::pow(mapping::VoxelBlockGridOptions{}.block_edge, 3)),
-                mean(ours.chunks_rebuilt));
+    const double block_voxels =
+        mean(ours.blocks_touched) * std::pow(mapping::VoxelBlockGridOptions{}.block_edge, 3);
+    std::printf("%s: rim per scan: %.0f blocks integrated (%.0f voxels), %.0f voxels projected (%.0f %%, the "
+                "activated cells), %.0f written (%.0f %%), %.0f chunks re-meshed\n",
+                preset.name.c_str(), mean(ours.blocks_touched), block_voxels, mean(ours.voxels_selected),
+                100.0 * mean(ours.voxels_selected) / block_voxels, mean(ours.voxels_updated),
+                100.0 * mean(ours.voxels_updated) / block_voxels, mean(ours.chunks_rebuilt));
     std::fflush(stdout);
     if (!options.peer) continue;
     const SystemRun peer = runVdbFusion(preset, sequence);

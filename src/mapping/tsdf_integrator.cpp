@@ -7,7 +7,6 @@
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tsl/robin_map.h>
-#include <tsl/robin_set.h>
 
 #include <algorithm>
 #include <chrono>
@@ -40,21 +39,75 @@ constexpr float kSmallestPlaneCosine = 1e-3f;
 // (Measured on outdoor_car: 1 voxel let roofs and facade tops run on past
 // their edges, precision at 3 voxels 0.994 against 0.998.)
 constexpr double kPlaneSeenToleranceVoxels = 0.5;
-// Point-to-plane: blocks are activated within the truncation plus this share
-// of a pixel's footprint along the ray (voxels in blocks activated by any
-// pixel are written as far as the whole footprint). Every point between two
-// beam rings is within half a footprint of one of them; the rest reaches the
-// voxel layer under the plane. Measured on flat ground under an OS1-128:
-// coverage 0.1-0.7 % lower than with the whole footprint, 6 % fewer blocks
-// (a half: 10 % fewer, coverage 1-2.5 % lower).
-constexpr float kPlaneActivationShare = 0.75f;
+// Point-to-plane: cells are activated within the truncation plus this share
+// of a pixel's footprint along the ray, as far as voxels take the plane
+// distance. (With whole blocks activated, 0.75 cost 0.1-0.7 % coverage for
+// 6 % fewer blocks; cells are thin across the ray and need the whole reach.)
+constexpr float kPlaneActivationShare = 1.0f;
+// Cells are activated this many voxels farther in front of each return than
+// the truncation band (or the plane's reach): the free space just in front
+// of a surface, which makes the lattice cubes on its far side observed.
+// Measured (mapping_accuracy_test, 20 scans): without it recall at 3 voxels
+// fell by 0.0002-0.0005 against whole blocks (2 voxels: 0.0002-0.0005 too),
+// with 4 it is as high or higher.
+constexpr double kFreeSpaceActivationVoxels = 4.0;
 // Poses whose rotation is off orthonormal by more than this are rejected.
 constexpr double kOrthonormalTolerance = 1e-3;
 // Projections of a voxel into the moving sensor before it counts as not
 // settling (projectIntoMovingSensor).
 constexpr int kMotionRefinements = 3;
 
-using BlockSet = tsl::robin_set<BlockKey, BlockKeyHash>;
+// Activation works in cells of kActivationCellVoxels^3 voxels (one bit each
+// in a block's mask, so at most 4 x 4 x 4 cells a block): a block's voxels
+// are projected only in the cells a return's band crossed, and not in the
+// rest of the block (under the ground, behind a wall), which no pixel writes
+// or only as far free space.
+constexpr int kActivationCellVoxels = 4;
+// A cell also selects the voxel layer next to it in the cells on either
+// side on each axis: the lattice cubes around a surface in the cell are then
+// whole, and so are the ones across its faces.
+using CellMask = uint64_t;
+using BlockCells = tsl::robin_map<BlockKey, CellMask, BlockKeyHash>;
+
+struct ActivationCells {
+  int block_edge = 0;
+  int cell_voxels = 1;   // voxels per cell edge
+  int cells_per_edge = 1;  // 1, 2 or 4
+  int shift = 0;           // log2(cells_per_edge): cell -> block by arithmetic shift
+  // Per voxel of a block: the cells whose activation selects it.
+  std::vector<CellMask> selecting_cells;
+
+  void configure(int edge) {
+    if (edge == block_edge) return;
+    block_edge = edge;
+    cell_voxels = std::max(kActivationCellVoxels, edge / 4);
+    cells_per_edge = std::max(edge / cell_voxels, 1);
+    cell_voxels = edge / cells_per_edge;
+    shift = cells_per_edge == 4 ? 2 : (cells_per_edge == 2 ? 1 : 0);
+    selecting_cells.assign(std::size_t(edge) * edge * edge, 0);
+    // The cells of one axis coordinate: its own, and the one below for the
+    // first layer of a cell.
+    const auto cellsOf = [&](int x, int* cells) {
+      cells[0] = cells[1] = cells[2] = x / cell_voxels;
+      if (x % cell_voxels == 0 && x > 0) cells[1] = x / cell_voxels - 1;
+      if (x % cell_voxels == cell_voxels - 1 && x + 1 < edge) cells[2] = x / cell_voxels + 1;
+    };
+    std::size_t v = 0;
+    for (int k = 0; k < edge; ++k)
+      for (int j = 0; j < edge; ++j)
+        for (int i = 0; i < edge; ++i, ++v) {
+          int ci[3], cj[3], ck[3];
+          cellsOf(i, ci);
+          cellsOf(j, cj);
+          cellsOf(k, ck);
+          for (int a = 0; a < 3; ++a)
+            for (int b = 0; b < 3; ++b)
+              for (int c = 0; c < 3; ++c)
+                selecting_cells[v] |= CellMask(1) << (ci[a] + cells_per_edge * (cj[b] + cells_per_edge * ck[c]));
+        }
+  }
+  double cellSize(double voxel_size) const { return voxel_size * cell_voxels; }
+};
 
 // Calls visit(key) for every block the segment a -> b passes through, a and b
 // in block units (world / block size): a 3D DDA (Amanatides & Woo) over the
@@ -174,8 +227,14 @@ struct BlockBuffers {
   std::vector<uint32_t> pending;
   std::vector<ProjectedPixel> pending_pixels;
   std::vector<uint8_t> pending_hits;
+  // The block's selected voxels (those of its activated cells), in order:
+  // index in the block and lattice coordinates (i, j, k).
+  std::vector<uint32_t> voxel_index;
+  std::vector<Eigen::Vector3f> lattice;
   void resize(std::size_t voxels) {
     if (points.size() == voxels) return;
+    voxel_index.resize(voxels);
+    lattice.resize(voxels);
     points.resize(voxels);
     moved_points.resize(voxels);
     frame_points.resize(voxels);
@@ -187,37 +246,6 @@ struct BlockBuffers {
     pending_hits.resize(voxels);
   }
 };
-
-// Which voxels the motion refinement may leave out: those that no pixel near
-// the one their first projection hit could write. A voxel is written only in
-// front of its pixel's return plus max(reach, truncation) (the plane's reach
-// for point-to-plane distances, the truncation along the ray), and never by
-// a pixel without a return in the clip; refining the motion moves a voxel
-// by the sensor's motion between two columns, so its pixel by a few columns
-// at most and its range by speed * time. far_limit holds, per pixel, the
-// largest such bound over the pixels within kFarColumns columns in its row
-// and in the rows next to it in altitude (at the same azimuth): a voxel
-// beyond it, by more than its range can change, stays unwritten whatever
-// pixel refinement gives it. Exact: leaving these voxels out changes no
-// voxel of the grid (tsdf_integrator_test's culling test).
-struct RefinementCull {
-  std::vector<float> far_limit;  // per pixel; -inf where no pixel nearby can write
-  float speed_mps = 0.0f, turn_rate = 0.0f;
-  float columns_per_radian = 0.0f;
-  float smallest_altitude_gap = 0.0f;  // radians between rows next in altitude
-  float beam_origin_radius = 0.0f;
-  // Columns (measurement ids) the pixel may move by, its own row's and the
-  // stagger to the rows next in altitude: the motion used spans these.
-  int column_reach = 0;
-  std::vector<uint8_t> timed;  // per column: in the sensor's column window (has a time)
-  std::vector<float> own, in_row;  // per pixel: its own bound, the row's dilation (reused between scans)
-};
-
-// Columns a voxel's pixel may move under refinement and still be covered by
-// far_limit: the image is dilated by one more, for the rounding of the
-// stagger between rows.
-constexpr int kFarColumns = 3;
-constexpr float kFarColumnShift = float(kFarColumns - 1);
 
 void requireFiniteOption(double value, const char* field) {
   if (!std::isfinite(value)) throw MappingError(std::string(field) + " must be finite, got " + numberText(value));
@@ -263,15 +291,17 @@ void TsdfIntegratorOptions::validate(const VoxelBlockGridOptions& grid) const {
 }
 
 struct TsdfIntegrator::Workspace {
-  tbb::enumerable_thread_specific<BlockSet> thread_blocks;
+  tbb::enumerable_thread_specific<BlockCells> thread_blocks;
   tbb::enumerable_thread_specific<std::size_t> thread_points_used{0};
   tbb::enumerable_thread_specific<BlockBuffers> thread_buffers;
-  BlockSet merged_blocks;
+  BlockCells merged_blocks;
+  ActivationCells cells;
+  std::vector<CellMask> touched_cells;     // per touched block: its activated cells
   std::vector<uint8_t> created;            // per touched block
   std::vector<uint32_t> integration_order; // touched blocks by azimuth
   std::vector<float> azimuth;              // per touched block, in the lidar frame
   std::vector<uint32_t> voxels_updated;    // per touched block
-  std::vector<uint32_t> voxels_not_refined;  // per touched block
+  std::vector<uint32_t> voxels_selected;   // per touched block
   std::vector<float> block_drift;          // per touched block: largest |sdf change| of a voxel
   std::vector<uint8_t> block_topology;     // per touched block: a voxel's sign or observation changed
   std::vector<ColumnMotion> column_motion_inverse;  // scan-time frame -> column-time frame
@@ -281,7 +311,6 @@ struct TsdfIntegrator::Workspace {
   std::vector<PixelPlane> pixel_planes;    // point-to-plane
   std::vector<uint8_t> near_seam;          // per column: no plane (moving sweeps)
   std::vector<float> pixel_angle;          // per row: the larger of its row and column spacing, radians
-  RefinementCull refinement_cull;          // moving sweeps
 };
 
 struct TsdfIntegrator::DriftSinceMarked {
@@ -350,88 +379,6 @@ std::vector<int> rowsByAltitude(const LidarIntrinsics& intrinsics) {
   return by_altitude;
 }
 
-void computeRefinementCull(const LidarModel& model, const RangeImage& scan, const PixelPlane* planes,
-                           float truncation, float min_range, float max_range, const Twist& twist,
-                           RefinementCull& cull) {
-  const int rows = scan.rows(), columns = scan.columns();
-  const LidarIntrinsics& intrinsics = model.intrinsics();
-  cull.speed_mps = float(twist.tail<3>().norm());
-  cull.turn_rate = float(twist.head<3>().norm());
-  cull.columns_per_radian = float(columns / (2.0 * M_PI));
-  cull.beam_origin_radius = float(std::hypot(intrinsics.beam_origin_radius_m, intrinsics.beam_origin_z_m));
-  const std::vector<int> by_altitude = rowsByAltitude(intrinsics);
-  cull.smallest_altitude_gap = std::numeric_limits<float>::infinity();
-  for (int rank = 0; rank + 1 < rows; ++rank)
-    cull.smallest_altitude_gap =
-        std::min(cull.smallest_altitude_gap, float(intrinsics.altitude_rad[by_altitude[rank + 1]] -
-                                                   intrinsics.altitude_rad[by_altitude[rank]]));
-  // The bound of each pixel, then its maximum over kFarColumns + 1 columns on
-  // either side (wrapping) in its row.
-  constexpr float kNone = -std::numeric_limits<float>::infinity();
-  std::vector<float>& own = cull.own;
-  std::vector<float>& in_row = cull.in_row;
-  own.resize(std::size_t(rows) * columns);
-  in_row.resize(own.size());
-  tbb::parallel_for(0, rows, [&](int v) {
-    for (int u = 0; u < columns; ++u) {
-      const std::size_t i = scan.index(v, u);
-      const float range = scan.range[i];
-      if (!(range >= min_range && range <= max_range)) {  // also NaN
-        own[i] = kNone;
-        continue;
-      }
-      const float reach = planes ? planes[i].reach : truncation;
-      own[i] = range + (std::isfinite(reach) ? std::max(reach, truncation) : truncation);
-    }
-    // The row with its ends wrapped around, so the window needs no modulo.
-    constexpr int kRadius = kFarColumns + 1;
-    float wrapped[2 * kRadius + 1];
-    const float* row = own.data() + scan.index(v, 0);
-    float* out = in_row.data() + scan.index(v, 0);
-    for (int u = 0; u < columns; ++u) {
-      float largest = kNone;
-      if (u >= kRadius && u + kRadius < columns) {
-        for (int d = -kRadius; d <= kRadius; ++d) largest = std::max(largest, row[u + d]);
-      } else {
-        for (int d = -kRadius; d <= kRadius; ++d) wrapped[d + kRadius] = row[((u + d) % columns + columns) % columns];
-        for (float value : wrapped) largest = std::max(largest, value);
-      }
-      out[u] = largest;
-    }
-  });
-  // And over the rows next in altitude, at the column of the same azimuth.
-  std::vector<int> rank_of(rows);
-  for (int rank = 0; rank < rows; ++rank) rank_of[by_altitude[rank]] = rank;
-  cull.far_limit.resize(own.size());
-  cull.column_reach = kFarColumns;
-  for (int v = 0; v < rows; ++v) {
-    const int rank = rank_of[v];
-    for (int other_rank = std::max(rank - 1, 0); other_rank <= std::min(rank + 1, rows - 1); ++other_rank) {
-      const double shift = (intrinsics.azimuth_offset_rad[by_altitude[other_rank]] - intrinsics.azimuth_offset_rad[v]) *
-                           cull.columns_per_radian;
-      cull.column_reach = std::max(cull.column_reach, kFarColumns + int(std::ceil(std::abs(shift))) + 1);
-    }
-  }
-  cull.timed.resize(columns);
-  for (int u = 0; u < columns; ++u) cull.timed[u] = intrinsics.columnInWindow(u);
-  tbb::parallel_for(0, rows, [&](int v) {
-    const int rank = rank_of[v];
-    for (int u = 0; u < columns; ++u) cull.far_limit[scan.index(v, u)] = in_row[scan.index(v, u)];
-    for (int other_rank = rank - 1; other_rank <= rank + 1; other_rank += 2) {
-      if (other_rank < 0 || other_rank >= rows) continue;
-      const int other = by_altitude[other_rank];
-      // Pi's column of one azimuth moves with the row's azimuth offset (theta_lut).
-      const int shift = int(std::lround((intrinsics.azimuth_offset_rad[other] - intrinsics.azimuth_offset_rad[v]) *
-                                        cull.columns_per_radian));
-      const int start = ((shift % columns) + columns) % columns;
-      const float* other_row = in_row.data() + scan.index(other, 0);
-      float* limits = cull.far_limit.data() + scan.index(v, 0);
-      for (int u = 0, w = start; u < columns; ++u, w = w + 1 == columns ? 0 : w + 1)
-        limits[u] = std::max(limits[u], other_row[w]);
-    }
-  });
-}
-
 // Pi of a block's voxels into the moving sensor: each voxel as the sensor
 // saw it when the column that measured it fired (the fixed point above, for
 // every voxel). All voxels are first projected as the block centre's column
@@ -442,66 +389,29 @@ void computeRefinementCull(const LidarModel& model, const RangeImage& scan, cons
 // settle lie where the sweep's start and end overlap or leave a gap (the
 // seam): they miss this scan rather than being averaged with the wrong
 // sensor position.
-// Returns how many voxels the cull left out of the refinement.
-std::size_t projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion, const RefinementCull* cull,
-                                    const Eigen::Vector3f& first, const Eigen::Matrix3f& lattice_steps, int edge,
-                                    BlockBuffers& buffers) {
-  const std::size_t voxels = std::size_t(edge) * edge * edge;
+// Works on the block's selected voxels (buffers.lattice, count of them).
+void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion, const Eigen::Vector3f& first,
+                             const Eigen::Matrix3f& lattice_steps, int edge, std::size_t count,
+                             BlockBuffers& buffers) {
   const Eigen::Vector3f block_centre = first + lattice_steps * Eigen::Vector3f::Constant(0.5f * float(edge - 1));
   const int centre_column = columnSeenFromMovingSensor(model, motion, block_centre);
-  std::size_t pending = 0, not_refined = 0;
+  std::size_t pending = 0;
   if (centre_column >= 0) {
-    // The block's lattice in the centre column's frame, built as the voxels' (buffers.points).
+    // The block's lattice in the centre column's frame.
     const Eigen::Vector3f moved_first = motion.toColumnFrame(centre_column, first);
     const Eigen::Matrix3f moved_steps = motion.inverse[centre_column].leftCols<3>() * lattice_steps;
-    std::size_t i = 0;
-    for (int k = 0; k < edge; ++k)
-      for (int j = 0; j < edge; ++j) {
-        const Eigen::Vector3f row_start = moved_first + moved_steps.col(1) * float(j) + moved_steps.col(2) * float(k);
-        for (int x = 0; x < edge; ++x) buffers.moved_points[i++] = row_start + moved_steps.col(0) * float(x);
-      }
-    model.projectMany(buffers.moved_points.data(), voxels, buffers.pixels.data(), buffers.hits.data());
-    const int columns = model.columns();
-    for (i = 0; i < voxels; ++i) {
+    for (std::size_t i = 0; i < count; ++i) buffers.moved_points[i] = moved_first + moved_steps * buffers.lattice[i];
+    model.projectMany(buffers.moved_points.data(), count, buffers.pixels.data(), buffers.hits.data());
+    for (std::size_t i = 0; i < count; ++i) {
       // A miss here is a voxel off the vertical field of view by more than
       // the sensor moved between the two columns: it is left out.
       if (!buffers.hits[i]) continue;
       buffers.frame_points[i] = buffers.moved_points[i];
-      const ProjectedPixel& pixel = buffers.pixels[i];
-      if (motion.settled(centre_column, pixel.column)) continue;
-      const float far_limit = cull ? cull->far_limit[std::size_t(pixel.row) * columns + pixel.column] : 0.0f;
-      if (cull && pixel.range > far_limit) {  // most voxels stop at this look
-        // The motion between the centre's column and any column the voxel's
-        // pixel can move to (a time jump at the seam makes this large);
-        // settled means within the tolerance of the motion used.
-        int before = pixel.column - cull->column_reach, after = pixel.column + cull->column_reach;
-        before += before < 0 ? columns : 0;
-        after -= after >= columns ? columns : 0;
-        const float centre_time = motion.time[centre_column];
-        const float time = std::max(std::abs(motion.time[before] - centre_time),
-                                    std::abs(motion.time[after] - centre_time)) + motion.tolerance_s;
-        const Eigen::Vector3f& point = buffers.moved_points[i];
-        const float horizontal = std::sqrt(point.x() * point.x() + point.y() * point.y());
-        // The point moves by at most `moved` plus `turned` times its distance
-        // from the lidar origin; angles are seen from the beam origin, r0 off it.
-        const float moved = cull->speed_mps * time, turned = cull->turn_rate * time;
-        const float shift = moved + turned * cull->beam_origin_radius;
-        const float azimuth_change = turned + shift / std::max(horizontal - cull->beam_origin_radius, 1e-3f);
-        const float altitude_change = turned + shift / std::max(pixel.range - cull->beam_origin_radius, 1e-3f);
-        const float range_change = shift + 1e-3f;
-        if (cull->timed[before] && cull->timed[after] && cull->timed[centre_column] &&
-            azimuth_change * cull->columns_per_radian < kFarColumnShift &&
-            altitude_change < cull->smallest_altitude_gap && pixel.range - range_change > far_limit) {
-          buffers.hits[i] = 0;  // beyond what any pixel it can move to writes
-          ++not_refined;
-          continue;
-        }
-      }
-      buffers.pending[pending++] = uint32_t(i);
+      if (!motion.settled(centre_column, buffers.pixels[i].column)) buffers.pending[pending++] = uint32_t(i);
     }
   } else {  // the centre is outside the field of view: start from the scan-time projection
-    model.projectMany(buffers.points.data(), voxels, buffers.pixels.data(), buffers.hits.data());
-    for (std::size_t i = 0; i < voxels; ++i)
+    model.projectMany(buffers.points.data(), count, buffers.pixels.data(), buffers.hits.data());
+    for (std::size_t i = 0; i < count; ++i)
       if (buffers.hits[i]) buffers.pending[pending++] = uint32_t(i);
   }
   for (int pass = 0; pass < kMotionRefinements && pending > 0; ++pass) {
@@ -524,7 +434,6 @@ std::size_t projectIntoMovingSensor(const LidarModel& model, const SweepMotion& 
     pending = unsettled;
   }
   for (std::size_t n = 0; n < pending; ++n) buffers.hits[buffers.pending[n]] = 0;
-  return not_refined;
 }
 
 // Per row, the angle between neighbouring pixels: the larger of the column
@@ -733,26 +642,38 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
     });
   }
 
-  // 1. Activation: the blocks the beam crosses within the truncation band
-  // around each return (paper section 4.2: activate blocks near each point),
-  // or within the plane's reach for point-to-plane distances.
+  // 1. Activation: the cells (and their blocks) the beam crosses within the
+  // truncation band around each return (paper section 4.2: activate blocks
+  // near each point), or within the plane's reach for point-to-plane distances.
   const Clock::time_point activation_start = Clock::now();
   const double block_size = grid.blockSize();
   const Eigen::Isometry3d world_from_lidar = pose.world_from_lidar;
   const int stride = options_.point_stride;
   const int strided_rows = (rows + stride - 1) / stride;
-  for (BlockSet& blocks : work.thread_blocks) blocks.clear();
+  ActivationCells& cells = work.cells;
+  cells.configure(grid.blockEdge());
+  const double cell_size = cells.cellSize(grid.voxelSize());
+  const float free_space_activation = float(kFreeSpaceActivationVoxels * grid.voxelSize());
+  for (BlockCells& blocks : work.thread_blocks) blocks.clear();
   for (std::size_t& count : work.thread_points_used) count = 0;
   tbb::parallel_for(
       tbb::blocked_range<int>(0, strided_rows, kActivationRowsPerTask), [&](const tbb::blocked_range<int>& range) {
-        BlockSet& blocks = work.thread_blocks.local();
+        BlockCells& blocks = work.thread_blocks.local();
         std::size_t& used = work.thread_points_used.local();
-        BlockKey previous(std::numeric_limits<int>::min(), 0, 0);
-        const auto insert = [&](const BlockKey& key) {
-          // Neighbouring pixels mostly cross the same blocks: skip the hash then.
-          if (key == previous) return;
-          previous = key;
-          blocks.insert(key);
+        const int low_bits = cells.cells_per_edge - 1, shift = cells.shift, cells_per_edge = cells.cells_per_edge;
+        BlockKey previous(std::numeric_limits<int>::min(), 0, 0), previous_block = previous;
+        CellMask* previous_mask = nullptr;  // valid until the next insertion into `blocks`
+        const auto insert = [&](const BlockKey& cell) {
+          // Neighbouring pixels mostly cross the same cells and blocks: skip the hash then.
+          if (cell == previous) return;
+          previous = cell;
+          const BlockKey block(cell.x() >> shift, cell.y() >> shift, cell.z() >> shift);  // floor division
+          if (block != previous_block || previous_mask == nullptr) {
+            previous_block = block;
+            previous_mask = &blocks[block];
+          }
+          *previous_mask |= CellMask(1) << ((cell.x() & low_bits) +
+                                            cells_per_edge * ((cell.y() & low_bits) + cells_per_edge * (cell.z() & low_bits)));
         };
         for (int strided_row = range.begin(); strided_row != range.end(); ++strided_row) {
           const int v = strided_row * stride;
@@ -767,22 +688,24 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
               const float plane_reach = work.pixel_planes[scan.index(v, u)].reach;
               if (std::isfinite(plane_reach)) reach = truncation + kPlaneActivationShare * (plane_reach - truncation);
             }
-            Eigen::Vector3f near_point = model.unproject(u, v, std::max(r - reach, 0.0f));
+            Eigen::Vector3f near_point = model.unproject(u, v, std::max(r - reach - free_space_activation, 0.0f));
             Eigen::Vector3f far_point = model.unproject(u, v, r + reach);
             if (moving) {
               const ColumnMotion& motion = column_motion_[u];
               near_point = motion.leftCols<3>() * near_point + motion.col(3);
               far_point = motion.leftCols<3>() * far_point + motion.col(3);
             }
-            visitBlocksOnSegment((world_from_lidar * near_point.cast<double>()) / block_size,
-                                 (world_from_lidar * far_point.cast<double>()) / block_size, insert);
+            visitBlocksOnSegment((world_from_lidar * near_point.cast<double>()) / cell_size,
+                                 (world_from_lidar * far_point.cast<double>()) / cell_size, insert);
           }
         }
       });
   statistics.points_used = work.thread_points_used.combine(std::plus<std::size_t>());
   work.merged_blocks.clear();
-  for (const BlockSet& blocks : work.thread_blocks) work.merged_blocks.insert(blocks.begin(), blocks.end());
-  touched_keys_.assign(work.merged_blocks.begin(), work.merged_blocks.end());
+  for (const BlockCells& blocks : work.thread_blocks)
+    for (const auto& [key, mask] : blocks) work.merged_blocks[key] |= mask;
+  touched_keys_.clear();
+  for (const auto& entry : work.merged_blocks) touched_keys_.push_back(entry.first);
   // Nearest blocks first, so that a memory budget running out keeps the
   // sensor's surroundings; ties broken by key so that the order (and the
   // grid's pool slots) does not depend on the threads.
@@ -796,6 +719,7 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
   });
   touched_blocks_.clear();
   work.created.clear();
+  work.touched_cells.clear();
   for (const BlockKey& key : touched_keys_) {
     bool created = false;
     VoxelBlock* block = adding ? grid.activate(key, &created) : grid.find(key);
@@ -806,10 +730,11 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
     }
     touched_blocks_.push_back(block);
     work.created.push_back(created);
+    work.touched_cells.push_back(work.merged_blocks.find(key)->second);
   }
   statistics.activation_seconds = secondsSince(activation_start);
 
-  // 2. Integration: every voxel of every touched block projected with Pi
+  // 2. Integration: every voxel of the activated cells projected with Pi
   // (eq. 8), d = Omega(u, v) - r (eq. 9), averaged (eq. 10). One block per
   // task, so no two threads write one voxel.
   const Clock::time_point integration_start = Clock::now();
@@ -820,15 +745,8 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
   const bool with_intensity = grid.options().store_intensity && scan.intensity.size() == scan.range.size();
   const VoxelUpdate voxel_update{options_.max_weight, adding};
   const SweepMotion sweep_motion{work.column_motion_inverse, work.column_time, time_tolerance_s};
-  const RefinementCull* cull = nullptr;
-  if (moving && options_.skip_unreachable_voxels) {
-    computeRefinementCull(model, scan, point_to_plane ? work.pixel_planes.data() : nullptr, truncation, min_range,
-                          max_range, pose.twist, work.refinement_cull);
-    // (A sensor with so few columns that the window wraps around is not culled.)
-    if (4 * work.refinement_cull.column_reach < columns) cull = &work.refinement_cull;
-  }
   work.voxels_updated.assign(touched_blocks_.size(), 0);
-  work.voxels_not_refined.assign(touched_blocks_.size(), 0);
+  work.voxels_selected.assign(touched_blocks_.size(), 0);
   work.block_drift.assign(touched_blocks_.size(), 0.0f);
   work.block_topology.assign(touched_blocks_.size(), 0);
   const float mesh_min_weight = options_.mesh_min_weight;
@@ -865,19 +783,27 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
       // voxel in double so that floats keep millimetres far from the origin.
       const Eigen::Vector3f first =
           (lidar_from_world * grid.voxelPosition(block.key, 0, 0, 0)).cast<float>();
-      std::size_t n = 0;
-      for (int k = 0; k < edge; ++k)
-        for (int j = 0; j < edge; ++j) {
-          const Eigen::Vector3f row_start = first + lattice_steps.col(1) * float(j) + lattice_steps.col(2) * float(k);
-          for (int i = 0; i < edge; ++i) buffers.points[n++] = row_start + lattice_steps.col(0) * float(i);
-        }
+      // Only the voxels of the cells activated.
+      const CellMask activated = work.touched_cells[b];
+      const CellMask* selecting_cells = cells.selecting_cells.data();
+      std::size_t count = 0;
+      for (std::size_t v = 0, k = 0; k < std::size_t(edge); ++k)
+        for (std::size_t j = 0; j < std::size_t(edge); ++j)
+          for (std::size_t i = 0; i < std::size_t(edge); ++i, ++v) {
+            if (!(selecting_cells[v] & activated)) continue;
+            buffers.voxel_index[count] = uint32_t(v);
+            buffers.lattice[count] = Eigen::Vector3f(float(i), float(j), float(k));
+            buffers.points[count] = first + lattice_steps * buffers.lattice[count];
+            ++count;
+          }
       if (moving) {
-        work.voxels_not_refined[b] = projectIntoMovingSensor(model, sweep_motion, cull, first, lattice_steps, edge, buffers);
+        projectIntoMovingSensor(model, sweep_motion, first, lattice_steps, edge, count, buffers);
       } else {
-        model.projectMany(buffers.points.data(), voxels, buffers.pixels.data(), buffers.hits.data());
+        model.projectMany(buffers.points.data(), count, buffers.pixels.data(), buffers.hits.data());
       }
       // Raw pointers: the compiler cannot prove the vectors' members unchanged
       // by the stores below and would reload them for every voxel.
+      const uint32_t* voxel_index = buffers.voxel_index.data();
       const uint8_t* hits = buffers.hits.data();
       const ProjectedPixel* pixels = buffers.pixels.data();
       const Eigen::Vector3f* frame_points = moving ? buffers.frame_points.data() : buffers.points.data();
@@ -887,14 +813,14 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
       BlockWriter write{sdf,          weight,          intensity,        sample_weights, intensities,
                         voxel_update, truncation,      mesh_min_weight, free_space_weight};
       if (!planes) {
-        for (std::size_t i = 0; i < voxels; ++i) {
+        for (std::size_t i = 0; i < count; ++i) {
           if (!hits[i]) continue;
           const std::size_t p = std::size_t(pixels[i].row) * columns + pixels[i].column;
           const float measured = ranges[p];
           if (!(measured >= min_range && measured <= max_range)) continue;  // also NaN
           const float along_ray = measured - pixels[i].range;                // eq. 9
           if (along_ray < -truncation) continue;  // occluded: behind the surface
-          write(i, p, along_ray);
+          write(voxel_index[i], p, along_ray);
         }
       } else {
         // Voxels beyond the pixel's truncation band wait for the check that
@@ -903,7 +829,7 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
         std::size_t unverified = 0;
         uint32_t* unverified_voxels = buffers.pending.data();
         Eigen::Vector3f* feet = buffers.moved_points.data();
-        for (std::size_t i = 0; i < voxels; ++i) {
+        for (std::size_t i = 0; i < count; ++i) {
           if (!hits[i]) continue;
           const std::size_t p = std::size_t(pixels[i].row) * columns + pixels[i].column;
           const PixelPlane& plane = planes[p];
@@ -911,14 +837,14 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
           const float along_ray = plane.range - pixels[i].range;                  // eq. 9
           if (!(std::abs(along_ray) <= plane.reach)) {  // also without a normal (NaN)
             if (along_ray < -truncation) continue;  // occluded: behind the surface
-            write(i, p, along_ray);
+            write(voxel_index[i], p, along_ray);
             continue;
           }
           const float to_plane = plane.distance(frame_points[i]);
           if (to_plane < -truncation) continue;  // behind the surface
           // Within the pixel's own truncation band the plane is the pixel's surface.
           if (std::abs(along_ray) <= truncation) {
-            write(i, p, to_plane);
+            write(voxel_index[i], p, to_plane);
           } else {
             unverified_voxels[unverified] = uint32_t(i);
             feet[unverified++] = frame_points[i] - to_plane * plane.normal;
@@ -940,18 +866,19 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
             const std::size_t q = std::size_t(foot_pixels[n].row) * columns + foot_pixels[n].column;
             if (foot_hits[n] && std::abs(plane.distance(pixel_points[q])) <= plane_tolerance &&
                 (feet[n] - pixel_points[q]).squaredNorm() <= plane_fill_squared) {
-              write(i, p, to_plane);  // (NaN for a pixel without a return fails the test)
+              write(voxel_index[i], p, to_plane);  // (NaN for a pixel without a return fails the test)
               continue;
             }
             // Otherwise eq. 9, but only where both distances put the voxel in
             // front: eq. 9 may say "in front" only because the voxel is off
             // the pixel's central ray.
             const float along_ray = plane.range - pixels[i].range;
-            if (along_ray > 0.0f && to_plane >= 0.0f) write(i, p, along_ray);
+            if (along_ray > 0.0f && to_plane >= 0.0f) write(voxel_index[i], p, along_ray);
           }
         }
       }
       work.voxels_updated[b] = write.updated;
+      work.voxels_selected[b] = uint32_t(count);
       work.block_drift[b] = write.drift;
       work.block_topology[b] = write.topology;
     }
@@ -966,7 +893,7 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
   for (std::size_t b = 0; b < touched_blocks_.size(); ++b) {
     VoxelBlock& block = *touched_blocks_[b];
     statistics.voxels_updated += work.voxels_updated[b];
-    statistics.voxels_not_refined += work.voxels_not_refined[b];
+    statistics.voxels_selected += work.voxels_selected[b];
     const bool may_be_empty = work.created[b] || !adding;
     if (may_be_empty &&
         std::none_of(block.weight.begin(), block.weight.end(), [](float w) { return w > 0.0f; })) {

@@ -1,8 +1,8 @@
 // Projective TSDF integration of range images (paper section 4.2, eq. 8-10):
-// every voxel of every block near the scan is projected with Pi into the
-// range image, its signed distance to what the pixel saw is truncated and
-// averaged with a weight cap. No ray casting, no races: blocks are updated in
-// parallel, each by one thread.
+// every voxel near the scan (in the cells of blocks that a return's band
+// crosses) is projected with Pi into the range image, its signed distance to
+// what the pixel saw is truncated and averaged with a weight cap. No ray
+// casting, no races: blocks are updated in parallel, each by one thread.
 //
 // Departures from the paper, both measured on the simulated sequences of
 // test/mapping_accuracy_test.cpp and benchmark/mapping_benchmark.cpp: the
@@ -99,12 +99,6 @@ struct TsdfIntegratorOptions {
   // full extraction's. 0 marks every change (exact).
   double mesh_tolerance_voxels = 0.1;
   float mesh_min_weight = 0.0f;
-  // A moving sweep's voxels whose first projection lands beyond what any
-  // pixel they could still move to writes (behind its return by more than
-  // the truncation, or the plane's reach) are not projected again with their
-  // own column's motion. Exact (the grid is the same either way); off only
-  // to check that.
-  bool skip_unreachable_voxels = true;
   // Throws MappingError naming the field (truncation below one voxel or above
   // 100 voxels, min >= max range, stride < 1, max_weight <= 0, ...).
   void validate(const VoxelBlockGridOptions& grid) const;
@@ -136,7 +130,7 @@ struct IntegrationStatistics {
   std::size_t blocks_created = 0;
   std::size_t blocks_refused = 0;    // not created: the grid's max_blocks was reached
   std::size_t voxels_updated = 0;
-  std::size_t voxels_not_refined = 0;  // skip_unreachable_voxels: left out of the motion refinement
+  std::size_t voxels_selected = 0;   // voxels of the blocks' activated cells: those projected
   std::size_t blocks_removed = 0;    // deintegrate: blocks left without any observation, removed
   std::size_t blocks_marked = 0;     // changed_generation set: a change that matters to the mesh
   double activation_seconds = 0.0;   // finding / creating blocks
