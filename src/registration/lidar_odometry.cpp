@@ -36,10 +36,6 @@ std::string seconds(double value) {
   return text.str();
 }
 
-}  // namespace
-
-namespace {
-
 // With normals from the model, the source's pixels without a normal of their
 // own (a sparse sensor's ground) pair with the model's planes.
 RegistrationOptions registrationOptions(const OdometryOptions& options) {
@@ -391,8 +387,7 @@ const VertexNormalMap& LidarOdometry::sourceWithoutMoving() {
     for (int column = 0; column < columns; ++column) {
       if (!marked(std::size_t(row) * columns + column)) continue;
       for (int r = std::max(0, row - kMovingGrowth); r <= std::min(rows - 1, row + kMovingGrowth); ++r)
-        for (int c = column - kMovingGrowth; c <= column + kMovingGrowth; ++c)
-        {
+        for (int c = column - kMovingGrowth; c <= column + kMovingGrowth; ++c) {
           const std::size_t i = std::size_t(r) * columns + std::size_t((c + columns) % columns);
           source_.points[i].setConstant(std::numeric_limits<float>::quiet_NaN());
           source_.normals[i].setConstant(std::numeric_limits<float>::quiet_NaN());
