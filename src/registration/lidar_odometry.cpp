@@ -289,8 +289,13 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
     moveColumns(measured_, deskewed_);
   else
     deskewed_ = measured_;
-  update.valid_pixels = std::size_t(std::count_if(deskewed_.normals.begin(), deskewed_.normals.end(),
-                                                  [](const Eigen::Vector3f& normal) { return normal.allFinite(); }));
+  // The pixels the registration may pair: with a normal, or, where the
+  // model's normals pair them too, every pixel with a point.
+  const bool pairs_without_normals = registrationOptions(options_).pair_source_without_normals;
+  update.valid_pixels = 0;
+  for (std::size_t i = 0; i < deskewed_.points.size(); ++i)
+    update.valid_pixels +=
+        deskewed_.points[i].allFinite() && (pairs_without_normals || deskewed_.normals[i].allFinite());
   moving_.assign(deskewed_.points.size(), 0);
   stale_.assign(deskewed_.points.size(), 0);
   if (update.degenerate) behind_model_.clear();

@@ -97,7 +97,7 @@ struct OdometryUpdate {
   Eigen::Vector3d angular_velocity = Eigen::Vector3d::Zero();  // lidar frame, rad/s
   uint64_t stamp_ns = 0;     // scan time: the pose's and the deskewed points' time
   std::size_t inliers = 0;
-  std::size_t valid_pixels = 0;  // pixels with a point and a normal (the source)
+  std::size_t valid_pixels = 0;  // source pixels the registration may pair (a point, and a normal unless model normals pair it)
   std::size_t moving_pixels = 0;  // of them, classified as moving
   // How far the registration moved the scan from the motion prior's pose
   // (the constant-velocity prediction): large where the motion changed or
