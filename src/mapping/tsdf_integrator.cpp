@@ -41,15 +41,12 @@ constexpr float kSmallestPlaneCosine = 1e-3f;
 constexpr double kPlaneSeenToleranceVoxels = 0.5;
 // Point-to-plane: cells are activated within the truncation plus this share
 // of a pixel's footprint along the ray, as far as voxels take the plane
-// distance. (With whole blocks activated, 0.75 cost 0.1-0.7 % coverage for
-// 6 % fewer blocks; cells are thin across the ray and need the whole reach.)
+// distance: cells are thin across the ray and need the whole reach.
 constexpr float kPlaneActivationShare = 1.0f;
 // Cells are activated this many voxels farther in front of each return than
 // the truncation band (or the plane's reach): the free space just in front
-// of a surface, which makes the lattice cubes on its far side observed.
-// Measured (mapping_accuracy_test, 20 scans): without it recall at 3 voxels
-// fell by 0.0002-0.0005 against whole blocks (2 voxels: 0.0002-0.0005 too),
-// with 4 it is as high or higher.
+// of a surface, which makes the lattice cubes on its far side observed
+// (fewer voxels lose recall; the README's VDBFusion section has the figures).
 constexpr double kFreeSpaceActivationVoxels = 4.0;
 // Poses whose rotation is off orthonormal by more than this are rejected.
 constexpr double kOrthonormalTolerance = 1e-3;

@@ -291,7 +291,7 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
     deskewed_ = measured_;
   // The pixels the registration may pair: with a normal, or, where the
   // model's normals pair them too, every pixel with a point.
-  const bool pairs_without_normals = registrationOptions(options_).pair_source_without_normals;
+  const bool pairs_without_normals = icp_.options().pair_source_without_normals;
   update.valid_pixels = 0;
   for (std::size_t i = 0; i < deskewed_.points.size(); ++i)
     update.valid_pixels +=
