@@ -190,5 +190,5 @@ excluded='_rostest_|^fuzz_|_preset_accuracy_test$|_mapping_accuracy_test$|_simul
 [ "${RIM_CHROOT_ALL_UNIT_TESTS:-0}" = 1 ] && excluded='_rostest_|^fuzz_'
 step "unit tests: ctest -E '$excluded' (see the header for why)"
 in_chroot "set +u; source .catkin_ws/devel/setup.bash; set -u; cd .catkin_ws/build &&
-  ctest --output-on-failure -E '$excluded' ${RIM_CHROOT_CTEST_ARGS:-}"
+  ctest -j2 --output-on-failure -E '$excluded' ${RIM_CHROOT_CTEST_ARGS:-}"
 step_done

@@ -107,9 +107,10 @@ demo() {
 
 run_tests() {
   ros_environment
-  # One runner for everything: gtests, rostests and the fuzzer runs are ctest tests.
+  # One runner for everything: gtests, rostests and the fuzzer runs are ctest tests,
+  # two at a time (the tests that keep both cores busy claim both: CMakeLists.txt).
   echo "== tests"
-  cd "$workspace/build" && ctest --output-on-failure
+  cd "$workspace/build" && ctest -j2 --output-on-failure
 }
 
 install_dependencies
