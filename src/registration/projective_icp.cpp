@@ -216,15 +216,16 @@ class KernelWeight {
   double alpha_, inverse_scale_squared_, inverse_alpha_distance_;
 };
 
-// The area weight's cap, lowered on a sensor with sparse rows to the range
-// where its rows lie kAreaWeightRowSpacing_m apart (median spacing of its
-// beams): farther, a pixel's pair rests on a plane fitted across rows
-// metres apart (far ground rings of keyframes taken elsewhere), and
-// weighting such pairs by range^2 lets them hold roll and pitch, so that a
-// VLP-16 or HDL-32E follows only a fraction of the body's sway (issue 14).
-// Sensors with rows 0.45 deg apart or closer (HDL-64E, OS-1-128, Pandar64,
-// VLP-32C) keep the 25 m default.
-constexpr double kAreaWeightRowSpacing_m = 0.2;
+// The area weight's cap, lowered on a sensor with sparse rows (median beam
+// spacing d) to kAreaWeightSpacing / d^2: farther, a pixel's pair rests on a
+// plane fitted across rows metres apart (a ring's spacing on the ground
+// grows as range^2 d), and weighting such pairs by range^2 lets them hold
+// roll and pitch, so that a VLP-16 or HDL-32E follows only a fraction of
+// the body's sway (issue 14). The constant is measured: the HDL-32E
+// (1.33 deg) needs about 11 m or less, the OS-0-128 (0.7 deg) indoors
+// loses accuracy below 25 m; HDL-64E, OS-1-128, Pandar64 and VLP-32C keep
+// the 25 m default.
+constexpr double kAreaWeightSpacing_m_rad2 = 0.0045;
 
 double areaWeightRange(double max_range_m, const LidarModel& model) {
   if (!(max_range_m > 0.0)) return 0.0;
@@ -233,8 +234,8 @@ double areaWeightRange(double max_range_m, const LidarModel& model) {
   for (std::size_t row = 1; row < altitude.size(); ++row) spacing.push_back(std::abs(altitude[row - 1] - altitude[row]));
   if (spacing.empty()) return max_range_m;
   std::nth_element(spacing.begin(), spacing.begin() + spacing.size() / 2, spacing.end());
-  const double row_spacing_rad = spacing[spacing.size() / 2];
-  return row_spacing_rad > 0.0 ? std::min(max_range_m, kAreaWeightRowSpacing_m / row_spacing_rad) : max_range_m;
+  const double d = spacing[spacing.size() / 2];
+  return d > 0.0 ? std::min(max_range_m, kAreaWeightSpacing_m_rad2 / (d * d)) : max_range_m;
 }
 
 // Pairs of one iteration (paper eq. 5-6) and their point-to-plane normal
