@@ -216,6 +216,28 @@ class KernelWeight {
   double alpha_, inverse_scale_squared_, inverse_alpha_distance_;
 };
 
+// The area weight's cap, lowered on a sensor with sparse rows (median beam
+// spacing d) to kAreaWeightSpacing / d^2: farther, a pixel's pair rests on a
+// plane fitted across rows metres apart (a ring's spacing on the ground
+// grows as range^2 d), and weighting such pairs by range^2 lets them hold
+// roll and pitch, so that a VLP-16 or HDL-32E follows only a fraction of
+// the body's sway (issue 14). The constant is measured: the HDL-32E
+// (1.33 deg) needs about 11 m or less, the OS-0-128 (0.7 deg) indoors
+// loses accuracy below 25 m; HDL-64E, OS-1-128, Pandar64 and VLP-32C keep
+// the 25 m default.
+constexpr double kAreaWeightSpacing_m_rad2 = 0.0045;
+
+double areaWeightRange(double max_range_m, const LidarModel& model) {
+  if (!(max_range_m > 0.0)) return 0.0;
+  std::vector<double> spacing;
+  const std::vector<double>& altitude = model.intrinsics().altitude_rad;
+  for (std::size_t row = 1; row < altitude.size(); ++row) spacing.push_back(std::abs(altitude[row - 1] - altitude[row]));
+  if (spacing.empty()) return max_range_m;
+  std::nth_element(spacing.begin(), spacing.begin() + spacing.size() / 2, spacing.end());
+  const double d = spacing[spacing.size() / 2];
+  return d > 0.0 ? std::min(max_range_m, kAreaWeightSpacing_m_rad2 / (d * d)) : max_range_m;
+}
+
 // Pairs of one iteration (paper eq. 5-6) and their point-to-plane normal
 // equations, in one parallel pass over the source points (moved by the
 // transforms as moveChunk moves them).
@@ -226,8 +248,9 @@ NormalEquations accumulate(const std::vector<Eigen::Vector3f>& points, const std
   const float max_distance_squared = float(gate_m * gate_m);
   const float min_cosine = float(options.min_normal_cosine);
   const KernelWeight weight_of(options.kernel);
-  const bool area_weighted = options.area_weight_max_range_m > 0.0;
-  const float max_range_squared = float(options.area_weight_max_range_m * options.area_weight_max_range_m);
+  const double area_weight_range_m = areaWeightRange(options.area_weight_max_range_m, target_model);
+  const bool area_weighted = area_weight_range_m > 0.0;
+  const float max_range_squared = float(area_weight_range_m * area_weight_range_m);
 
   // Deterministic: the same blocks summed in the same order on every run and
   // thread count, so rim run and the nodelets give the same poses to the bit.

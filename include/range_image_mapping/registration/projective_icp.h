@@ -47,6 +47,8 @@ struct RegistrationOptions {
   // Pairs are weighted by the area their pixel covers, range^2 up to this
   // range (and equally beyond it): the static world, far and wide, then
   // outweighs a near object that fills many pixels. 0: every pair alike.
+  // On a sensor with sparse rows the registration lowers it further, from
+  // the target model's beam spacing (areaWeightRange in projective_icp.cpp).
   double area_weight_max_range_m = 25.0;
   RobustKernel kernel;
   NormalMapOptions normals;
