@@ -8,9 +8,11 @@
 // between beam rings), z-buffered nearest first as the sensor would.
 #pragma once
 
+#include "range_image_mapping/mapping/voxel_block_grid.h"
 #include "range_image_mapping/normal_map.h"
 
 #include <Eigen/Geometry>
+#include <tsl/robin_map.h>
 
 #include <cstdint>
 #include <deque>
@@ -72,29 +74,38 @@ class LocalModel {
     int stride = 1;
     std::vector<Eigen::Vector3f> points, normals;  // valid pixels; normals NaN where none
   };
+  // Moments of points about the centre of their voxel (odometry frame).
+  struct VoxelMoments {
+    double count = 0.0;
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();  // sum of d d^T
+  };
+  using VoxelKey = mapping::BlockKey;
   struct Keyframe {
     Eigen::Isometry3d odom_from_lidar;
     std::vector<Level> levels;
     bool provisional = false;
+    // normal_radius_m > 0: its finest level's moments per voxel, taken out
+    // of the model's when it leaves.
+    std::vector<std::pair<VoxelKey, VoxelMoments>> voxels;
   };
-  // normal_radius_m > 0: the newest keyframe's normals from the model's points.
+  // normal_radius_m > 0: the newest keyframe's voxels into the model's
+  // moments, and its normals from the model's points.
   void computeModelNormals();
+  void withdrawVoxels(const Keyframe& keyframe);
 
   LocalModelOptions options_;
   std::deque<Keyframe> keyframes_;
-  // computeModelNormals: the finest level's points of every keyframe in the
-  // newest one's frame, sorted by voxel, and each voxel's run of them.
-  std::vector<Eigen::Vector3f> grid_points_;
-  std::vector<std::pair<uint64_t, uint32_t>> grid_order_;
-  std::vector<std::pair<uint32_t, uint32_t>> voxel_runs_;
-  std::vector<uint64_t> voxel_keys_;
-  struct VoxelMoments {
-    double count;
-    Eigen::Vector3d mean;
-    Eigen::Matrix3d scatter;  // sum of (p - mean)(p - mean)^T
-  };
-  std::vector<VoxelMoments> voxel_moments_;
-  std::vector<Eigen::Vector3f> voxel_normals_;  // NaN where the block is no plane
+  // computeModelNormals: the finest level's points of every keyframe,
+  // moments per voxel, kept from one keyframe to the next (keyframe poses
+  // never change), so each new one adds its own and fits planes only where
+  // its points are.
+  tsl::robin_map<VoxelKey, VoxelMoments, mapping::BlockKeyHash> model_voxels_;
+  tsl::robin_map<VoxelKey, uint32_t, mapping::BlockKeyHash> slot_of_voxel_;  // the newest keyframe's
+  std::vector<uint32_t> slot_of_point_;   // its finest points' voxels
+  std::vector<VoxelKey> key_of_point_;
+  std::vector<Eigen::Vector3d> odom_points_;
+  std::vector<Eigen::Vector3f> slot_normals_;  // in its lidar frame; NaN where the block is no plane
   // Per level pixel: the nearest range's bits, then the winning point's
   // number (atomic compare-and-swap minimums); per point its pixel and range.
   mutable std::vector<std::vector<uint32_t>> nearest_, winner_;
