@@ -47,10 +47,7 @@ LocalModel::LocalModel(LocalModelOptions options) : options_(options) {
     throw std::invalid_argument("local model: normal_radius_m must be finite and not negative (0: off)");
 }
 
-void LocalModel::clear() {
-  keyframes_.clear();
-  model_voxels_.clear();
-}
+void LocalModel::clear() { keyframes_.clear(); }
 
 Eigen::Isometry3d LocalModel::newestPose() const {
   return keyframes_.empty() ? Eigen::Isometry3d::Identity() : keyframes_.back().odom_from_lidar;
@@ -67,16 +64,12 @@ bool LocalModel::wantsKeyframe(const Eigen::Isometry3d& odom_from_lidar) const {
 
 void LocalModel::add(const std::vector<VertexNormalMap>& levels, const Eigen::Isometry3d& odom_from_lidar,
                      bool provisional) {
-  if (!keyframes_.empty() && keyframes_.back().provisional) {
-    withdrawVoxels(keyframes_.back());
-    keyframes_.pop_back();
-  }
+  if (!keyframes_.empty() && keyframes_.back().provisional) keyframes_.pop_back();
   if (!keyframes_.empty() && keyframes_.back().levels.size() != levels.size())
     throw std::invalid_argument("local model: a keyframe with " + std::to_string(levels.size()) +
                                 " levels after ones with " + std::to_string(keyframes_.back().levels.size()));
   Keyframe keyframe;
   if (keyframes_.size() >= options_.keyframes) {  // reuse the oldest one's buffers
-    withdrawVoxels(keyframes_.front());
     keyframe = std::move(keyframes_.front());
     keyframes_.pop_front();
   }
@@ -106,81 +99,75 @@ namespace {
 // of the radius (more than one ring's line) and its thickness is at most
 // kMaxThickness of that span (not a crease, a kerb, a corner).
 constexpr double kMinSpan = 0.15, kMaxThickness = 0.3;
+constexpr uint32_t kNoVoxel = std::numeric_limits<uint32_t>::max();
 
 }  // namespace
 
-void LocalModel::withdrawVoxels(const Keyframe& keyframe) {
-  for (const auto& [key, moments] : keyframe.voxels) {
-    const auto it = model_voxels_.find(key);
-    if (it == model_voxels_.end()) continue;
-    VoxelMoments& total = it.value();
-    total.count -= moments.count;
-    if (total.count < 0.5) {  // counts are whole numbers: empty
-      model_voxels_.erase(it);
-      continue;
-    }
-    total.sum -= moments.sum;
-    total.outer -= moments.outer;
-  }
-}
-
-// The neighbourhood of a point is the block of 3 x 3 x 3 voxels (odometry
-// frame) around its voxel, 2 normal_radius_m wide: every point of a voxel
-// shares it, so the plane is fitted once per voxel of the newest keyframe,
-// from the voxels' moments joined about the centre voxel's centre, instead
-// of once per point over its neighbours.
+// The neighbourhood of a point is the block of 3 x 3 x 3 voxels around its
+// voxel (in the newest keyframe's frame), 2 normal_radius_m wide: every point
+// of a voxel shares it, so the plane is fitted once per voxel of the newest
+// keyframe, from the voxels' moments joined about the centre voxel's centre,
+// instead of once per point over its neighbours.
 void LocalModel::computeModelNormals() {
   const double voxel_size = 2.0 * options_.normal_radius_m / 3.0;
-  const double inverse_size = 1.0 / voxel_size;
+  const float inverse_size = float(1.0 / voxel_size);
   Keyframe& newest = keyframes_.back();
-  const Eigen::Isometry3d& odom_from_lidar = newest.odom_from_lidar;
-  const auto keyOf = [&](const Eigen::Vector3d& point) {
+  const Eigen::Isometry3d newest_from_odom = newest.odom_from_lidar.inverse();
+  const auto keyOf = [&](const Eigen::Vector3f& point) {
     return VoxelKey(int(std::floor(point.x() * inverse_size)), int(std::floor(point.y() * inverse_size)),
                     int(std::floor(point.z() * inverse_size)));
   };
   const auto centreOf = [&](const VoxelKey& key) { return (key.cast<double>().array() + 0.5).matrix() * voxel_size; };
 
-  // The newest keyframe's finest points by voxel, and their moments.
-  const Level& finest = newest.levels.back();
-  const std::size_t n = finest.points.size();
-  odom_points_.resize(n);
-  key_of_point_.resize(n);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 8192), [&](const tbb::blocked_range<std::size_t>& block) {
-    for (std::size_t i = block.begin(); i < block.end(); ++i) {
-      odom_points_[i] = odom_from_lidar * finest.points[i].cast<double>();
-      key_of_point_[i] = keyOf(odom_points_[i]);
+  // The finest level's points of every keyframe, in the newest one's frame,
+  // summed per voxel; a run of points in one voxel (neighbouring pixels)
+  // takes one look-up.
+  model_voxels_.clear();
+  for (const Keyframe& keyframe : keyframes_) {
+    const Eigen::Isometry3f newest_from_keyframe = (newest_from_odom * keyframe.odom_from_lidar).cast<float>();
+    VoxelMoments* moments = nullptr;  // valid until the next insertion, which looks up again
+    VoxelKey last_key;
+    for (const Eigen::Vector3f& point : keyframe.levels.back().points) {
+      const Eigen::Vector3f moved = newest_from_keyframe * point;
+      const VoxelKey key = keyOf(moved);
+      if (!moments || key != last_key) {
+        moments = &model_voxels_[key];
+        last_key = key;
+      }
+      const Eigen::Vector3d d = moved.cast<double>() - centreOf(key);
+      moments->count += 1.0;
+      moments->sum += d;
+      moments->outer.noalias() += d * d.transpose();
     }
-  });
+  }
+  // The newest keyframe's voxels (of every level's points) that hold points.
   slot_of_voxel_.clear();
-  slot_of_point_.resize(n);
-  newest.voxels.clear();
-  for (std::size_t i = 0; i < n; ++i) {
-    const auto [it, inserted] = slot_of_voxel_.try_emplace(key_of_point_[i], uint32_t(newest.voxels.size()));
-    if (inserted) newest.voxels.push_back({key_of_point_[i], VoxelMoments{}});
-    slot_of_point_[i] = it->second;
-    VoxelMoments& moments = newest.voxels[it->second].second;
-    const Eigen::Vector3d d = odom_points_[i] - centreOf(key_of_point_[i]);
-    moments.count += 1.0;
-    moments.sum += d;
-    moments.outer.noalias() += d * d.transpose();
-  }
-  for (const auto& [key, moments] : newest.voxels) {
-    VoxelMoments& total = model_voxels_[key];
-    total.count += moments.count;
-    total.sum += moments.sum;
-    total.outer += moments.outer;
-  }
+  newest_voxels_.clear();
+  slot_of_point_.clear();
+  for (const Level& level : newest.levels)
+    for (const Eigen::Vector3f& point : level.points) {
+      const VoxelKey key = keyOf(point);
+      const auto found = slot_of_voxel_.find(key);
+      if (found != slot_of_voxel_.end()) {
+        slot_of_point_.push_back(found->second);
+      } else if (model_voxels_.count(key)) {
+        slot_of_point_.push_back(uint32_t(newest_voxels_.size()));
+        slot_of_voxel_.emplace(key, uint32_t(newest_voxels_.size()));
+        newest_voxels_.push_back(key);
+      } else {
+        slot_of_point_.push_back(kNoVoxel);
+      }
+    }
 
   // Each of its voxels' plane over the block.
   const double min_span_squared = (kMinSpan * options_.normal_radius_m) * (kMinSpan * options_.normal_radius_m);
   const double max_thickness_squared = kMaxThickness * kMaxThickness;
   constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
-  const Eigen::Matrix3d lidar_from_odom = odom_from_lidar.linear().transpose();
-  slot_normals_.resize(newest.voxels.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, newest.voxels.size(), 256),
+  slot_normals_.resize(newest_voxels_.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, newest_voxels_.size(), 256),
                     [&](const tbb::blocked_range<std::size_t>& block) {
                       for (std::size_t v = block.begin(); v < block.end(); ++v) {
-                        const VoxelKey& key = newest.voxels[v].first;
+                        const VoxelKey& key = newest_voxels_[v];
                         // The block's moments about the centre voxel's centre: a
                         // neighbour's, about its own centre o away, shifted by o.
                         double count = 0.0;
@@ -209,33 +196,26 @@ void LocalModel::computeModelNormals() {
                         if (!(eigenvalues(1) >= min_span_squared) ||
                             !(eigenvalues(0) <= max_thickness_squared * eigenvalues(1)))
                           continue;
-                        const Eigen::Vector3f normal = (lidar_from_odom * solver.eigenvectors().col(0)).cast<float>().normalized();
+                        const Eigen::Vector3f normal = solver.eigenvectors().col(0).cast<float>().normalized();
                         if (normal.allFinite()) slot_normals_[v] = normal;
                       }
                     });
   // Where the model has no plane (a far wall's rings a metre apart), the
-  // keyframe's own normal, if any, stays. A coarse level's points are
-  // pixels of the finest level, so in its voxels.
-  for (std::size_t l = 0; l < newest.levels.size(); ++l) {
-    Level& level = newest.levels[l];
-    const bool is_finest = l + 1 == newest.levels.size();
+  // keyframe's own normal, if any, stays.
+  std::size_t first = 0;
+  for (Level& level : newest.levels) {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, level.points.size(), 4096),
                       [&](const tbb::blocked_range<std::size_t>& block) {
                         for (std::size_t i = block.begin(); i < block.end(); ++i) {
-                          const Eigen::Vector3f& point = level.points[i];
-                          uint32_t slot;
-                          if (is_finest) {
-                            slot = slot_of_point_[i];
-                          } else {
-                            const auto it = slot_of_voxel_.find(keyOf(odom_from_lidar * point.cast<double>()));
-                            if (it == slot_of_voxel_.end()) continue;
-                            slot = it->second;
-                          }
+                          const uint32_t slot = slot_of_point_[first + i];
+                          if (slot == kNoVoxel) continue;
                           const Eigen::Vector3f& normal = slot_normals_[slot];
+                          const Eigen::Vector3f& point = level.points[i];
                           if (normal.allFinite())
                             level.normals[i] = normal.dot(point) > 0.0f ? Eigen::Vector3f(-normal) : normal;
                         }
                       });
+    first += level.points.size();
   }
 }
 

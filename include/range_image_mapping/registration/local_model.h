@@ -74,38 +74,31 @@ class LocalModel {
     int stride = 1;
     std::vector<Eigen::Vector3f> points, normals;  // valid pixels; normals NaN where none
   };
-  // Moments of points about the centre of their voxel (odometry frame).
+  struct Keyframe {
+    Eigen::Isometry3d odom_from_lidar;
+    std::vector<Level> levels;
+    bool provisional = false;
+  };
+  // normal_radius_m > 0: the newest keyframe's normals from the model's points.
+  void computeModelNormals();
+
+  LocalModelOptions options_;
+  std::deque<Keyframe> keyframes_;
+  // computeModelNormals: the finest level's points of every keyframe, in the
+  // newest one's frame, as moments (about the voxel's centre) per voxel.
   struct VoxelMoments {
     double count = 0.0;
     Eigen::Vector3d sum = Eigen::Vector3d::Zero();
     Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();  // sum of d d^T
   };
   using VoxelKey = mapping::BlockKey;
-  struct Keyframe {
-    Eigen::Isometry3d odom_from_lidar;
-    std::vector<Level> levels;
-    bool provisional = false;
-    // normal_radius_m > 0: its finest level's moments per voxel, taken out
-    // of the model's when it leaves.
-    std::vector<std::pair<VoxelKey, VoxelMoments>> voxels;
-  };
-  // normal_radius_m > 0: the newest keyframe's voxels into the model's
-  // moments, and its normals from the model's points.
-  void computeModelNormals();
-  void withdrawVoxels(const Keyframe& keyframe);
-
-  LocalModelOptions options_;
-  std::deque<Keyframe> keyframes_;
-  // computeModelNormals: the finest level's points of every keyframe,
-  // moments per voxel, kept from one keyframe to the next (keyframe poses
-  // never change), so each new one adds its own and fits planes only where
-  // its points are.
   tsl::robin_map<VoxelKey, VoxelMoments, mapping::BlockKeyHash> model_voxels_;
-  tsl::robin_map<VoxelKey, uint32_t, mapping::BlockKeyHash> slot_of_voxel_;  // the newest keyframe's
-  std::vector<uint32_t> slot_of_point_;   // its finest points' voxels
-  std::vector<VoxelKey> key_of_point_;
-  std::vector<Eigen::Vector3d> odom_points_;
-  std::vector<Eigen::Vector3f> slot_normals_;  // in its lidar frame; NaN where the block is no plane
+  // The newest keyframe's voxels, each level's points' voxel (concatenated),
+  // and each voxel's plane normal (NaN where the block is no plane).
+  tsl::robin_map<VoxelKey, uint32_t, mapping::BlockKeyHash> slot_of_voxel_;
+  std::vector<VoxelKey> newest_voxels_;
+  std::vector<uint32_t> slot_of_point_;
+  std::vector<Eigen::Vector3f> slot_normals_;
   // Per level pixel: the nearest range's bits, then the winning point's
   // number (atomic compare-and-swap minimums); per point its pixel and range.
   mutable std::vector<std::vector<uint32_t>> nearest_, winner_;
