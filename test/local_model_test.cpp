@@ -180,10 +180,10 @@ TEST(LocalModel, NormalsFromTheModelFindTheFloorBetweenASparseSensorsRings) {
   }
 }
 
-// The model's voxels are kept from one keyframe to the next: a keyframe that
-// leaves (dropped, or a provisional one replaced) must take its points out.
-// Keyframes of a tilted floor come and go before flat ones; the model that
-// saw them must give the normals of one that never did.
+// A keyframe that leaves the model (dropped, or a provisional one replaced)
+// must take its points out of the later keyframes' normals: keyframes of a
+// tilted floor come and go before flat ones, and the model that saw them
+// must give the normals of one that never did.
 TEST(LocalModel, NormalsKeptBetweenKeyframesMatchAModelBuiltAfresh) {
   const std::vector<int> strides{2, 1};
   const std::vector<VertexNormalMap> flat = pyramid(floorScan(), strides);
