@@ -134,12 +134,14 @@ LidarModelConstPtr sparseSensor() {
   return model;
 }
 
-RangeImage floorScan() {
+// The floor rises by tan(tilt) per metre along x (0: flat).
+RangeImage floorScan(float tilt_rad = 0.0f) {
   RangeImage image(sparseSensor());
   for (int v = 0; v < image.rows(); ++v)
     for (int u = 0; u < image.columns(); ++u) {
       const Eigen::Vector3f direction = sparseSensor()->direction(u, v);
-      if (direction.z() < -0.01f) image.range[image.index(v, u)] = 1.5f / -direction.z();
+      const float descent = direction.z() - std::tan(tilt_rad) * direction.x();
+      if (descent < -0.01f) image.range[image.index(v, u)] = 1.5f / -descent;
     }
   return image;
 }
@@ -175,6 +177,42 @@ TEST(LocalModel, NormalsFromTheModelFindTheFloorBetweenASparseSensorsRings) {
     EXPECT_GT(pixelsWithNormals(rendered[l]), validPixels(levels[l]) / 5) << "stride " << strides[l];
     for (const Eigen::Vector3f& normal : rendered[l].normals)
       if (normal.allFinite()) EXPECT_GT(normal.z(), std::cos(0.5 * kDegree)) << normal.transpose();
+  }
+}
+
+// A keyframe that leaves the model (dropped, or a provisional one replaced)
+// must take its points out of the later keyframes' normals: keyframes of a
+// tilted floor come and go before flat ones, and the model that saw them
+// must give the normals of one that never did.
+TEST(LocalModel, NormalsKeptBetweenKeyframesMatchAModelBuiltAfresh) {
+  const std::vector<int> strides{2, 1};
+  const std::vector<VertexNormalMap> flat = pyramid(floorScan(), strides);
+  const std::vector<VertexNormalMap> tilted = pyramid(floorScan(float(15.0 * kDegree)), strides);
+  LocalModelOptions options{2, 0.0, 0.0, 1.0};
+  LocalModel rolling(options), fresh(options);
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  const auto at = [&](double x) {
+    pose.translation().x() = x;
+    return pose;
+  };
+  rolling.add(tilted, at(0.0), true);  // provisional: replaced by the next
+  rolling.add(flat, at(0.0), false);
+  rolling.add(tilted, at(0.4), false);
+  for (int k = 2; k < 5; ++k) rolling.add(flat, at(0.4 * k), false);
+  for (int k = 2; k < 5; ++k) fresh.add(flat, at(0.4 * k), false);
+  ASSERT_EQ(rolling.size(), 2u);
+  std::vector<VertexNormalMap> kept, built;
+  rolling.render(*sparseSensor(), pose, kept);
+  fresh.render(*sparseSensor(), pose, built);
+  ASSERT_EQ(kept.size(), strides.size());
+  for (std::size_t l = 0; l < strides.size(); ++l) {
+    EXPECT_GT(pixelsWithNormals(built[l]), validPixels(flat[l]) / 5) << "stride " << strides[l];
+    EXPECT_EQ(pixelsWithNormals(kept[l]), pixelsWithNormals(built[l])) << "stride " << strides[l];
+    for (std::size_t p = 0; p < kept[l].normals.size(); ++p)
+      if (kept[l].normals[p].allFinite() && built[l].normals[p].allFinite())
+        ASSERT_LT((kept[l].normals[p] - built[l].normals[p]).norm(), 1e-5f)
+            << "stride " << strides[l] << " pixel " << p << ": " << kept[l].normals[p].transpose() << " against "
+            << built[l].normals[p].transpose();
   }
 }
 

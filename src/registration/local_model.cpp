@@ -2,7 +2,6 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_sort.h>
 
 #include <Eigen/Eigenvalues>
 
@@ -96,111 +95,100 @@ void LocalModel::add(const std::vector<VertexNormalMap>& levels, const Eigen::Is
 
 namespace {
 
-// Voxel coordinates packed into one key, z in the low bits (so a column of
-// voxels is a run of keys).
-constexpr int kVoxelBits = 21;
-constexpr int64_t kVoxelOffset = int64_t(1) << (kVoxelBits - 1);
-uint64_t voxelKey(int64_t x, int64_t y, int64_t z) {
-  const auto part = [](int64_t v) { return uint64_t(std::clamp<int64_t>(v + kVoxelOffset, 0, (int64_t(1) << kVoxelBits) - 1)); };
-  return (part(x) << (2 * kVoxelBits)) | (part(y) << kVoxelBits) | part(z);
-}
-
 // A neighbourhood is a plane when its second axis spans at least kMinSpan
 // of the radius (more than one ring's line) and its thickness is at most
 // kMaxThickness of that span (not a crease, a kerb, a corner).
 constexpr double kMinSpan = 0.15, kMaxThickness = 0.3;
+constexpr uint32_t kNoVoxel = std::numeric_limits<uint32_t>::max();
 
 }  // namespace
 
 // The neighbourhood of a point is the block of 3 x 3 x 3 voxels around its
-// voxel, 2 normal_radius_m wide: every point of a voxel shares it, so the
-// plane is fitted once per voxel, from the voxels' moments (count, mean,
-// scatter about the mean) joined by the parallel-axis theorem, instead of
-// once per point over its neighbours.
+// voxel (in the newest keyframe's frame), 2 normal_radius_m wide: every point
+// of a voxel shares it, so the plane is fitted once per voxel of the newest
+// keyframe, from the voxels' moments joined about the centre voxel's centre,
+// instead of once per point over its neighbours.
 void LocalModel::computeModelNormals() {
   const double voxel_size = 2.0 * options_.normal_radius_m / 3.0;
+  const float inverse_size = float(1.0 / voxel_size);
   Keyframe& newest = keyframes_.back();
   const Eigen::Isometry3d newest_from_odom = newest.odom_from_lidar.inverse();
-  // The finest level's points of every keyframe, in the newest one's frame.
-  grid_points_.clear();
+  const auto keyOf = [&](const Eigen::Vector3f& point) {
+    return VoxelKey(int(std::floor(point.x() * inverse_size)), int(std::floor(point.y() * inverse_size)),
+                    int(std::floor(point.z() * inverse_size)));
+  };
+  const auto centreOf = [&](const VoxelKey& key) { return (key.cast<double>().array() + 0.5).matrix() * voxel_size; };
+
+  // The finest level's points of every keyframe, in the newest one's frame,
+  // summed per voxel; a run of points in one voxel (neighbouring pixels)
+  // takes one look-up.
+  model_voxels_.clear();
   for (const Keyframe& keyframe : keyframes_) {
     const Eigen::Isometry3f newest_from_keyframe = (newest_from_odom * keyframe.odom_from_lidar).cast<float>();
-    for (const Eigen::Vector3f& point : keyframe.levels.back().points)
-      grid_points_.push_back(newest_from_keyframe * point);
-  }
-  const float inverse_size = float(1.0 / voxel_size);
-  const auto keyOf = [&](const Eigen::Vector3f& point) {
-    return voxelKey(int64_t(std::floor(point.x() * inverse_size)), int64_t(std::floor(point.y() * inverse_size)),
-                    int64_t(std::floor(point.z() * inverse_size)));
-  };
-  grid_order_.resize(grid_points_.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, grid_points_.size(), 8192),
-                    [&](const tbb::blocked_range<std::size_t>& block) {
-                      for (std::size_t i = block.begin(); i < block.end(); ++i)
-                        grid_order_[i] = {keyOf(grid_points_[i]), uint32_t(i)};
-                    });
-  tbb::parallel_sort(grid_order_.begin(), grid_order_.end());
-  voxel_keys_.clear();
-  voxel_runs_.clear();
-  for (std::size_t i = 0; i < grid_order_.size(); ++i) {
-    if (i == 0 || grid_order_[i].first != grid_order_[i - 1].first) {
-      voxel_keys_.push_back(grid_order_[i].first);
-      voxel_runs_.push_back({uint32_t(i), uint32_t(i)});
+    VoxelMoments* moments = nullptr;  // valid until the next insertion, which looks up again
+    VoxelKey last_key;
+    for (const Eigen::Vector3f& point : keyframe.levels.back().points) {
+      const Eigen::Vector3f moved = newest_from_keyframe * point;
+      const VoxelKey key = keyOf(moved);
+      if (!moments || key != last_key) {
+        moments = &model_voxels_[key];
+        last_key = key;
+      }
+      const Eigen::Vector3d d = moved.cast<double>() - centreOf(key);
+      moments->count += 1.0;
+      moments->sum += d;
+      moments->outer.noalias() += d * d.transpose();
     }
-    voxel_runs_.back().second = uint32_t(i + 1);
   }
-  // Each voxel's moments, about its first point (float sums stay exact).
-  voxel_moments_.resize(voxel_keys_.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, voxel_keys_.size(), 1024),
-                    [&](const tbb::blocked_range<std::size_t>& block) {
-                      for (std::size_t v = block.begin(); v < block.end(); ++v) {
-                        const auto [begin, end] = voxel_runs_[v];
-                        const Eigen::Vector3d origin = grid_points_[grid_order_[begin].second].cast<double>();
-                        Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-                        Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();
-                        for (uint32_t k = begin; k < end; ++k) {
-                          const Eigen::Vector3d d = grid_points_[grid_order_[k].second].cast<double>() - origin;
-                          sum += d;
-                          outer.noalias() += d * d.transpose();
-                        }
-                        VoxelMoments& moments = voxel_moments_[v];
-                        moments.count = double(end - begin);
-                        moments.mean = origin + sum / moments.count;
-                        moments.scatter = outer - sum * sum.transpose() / moments.count;
-                      }
-                    });
-  // Each voxel's plane over its block.
+  // The newest keyframe's voxels (of every level's points) that hold points.
+  slot_of_voxel_.clear();
+  newest_voxels_.clear();
+  slot_of_point_.clear();
+  for (const Level& level : newest.levels)
+    for (const Eigen::Vector3f& point : level.points) {
+      const VoxelKey key = keyOf(point);
+      const auto found = slot_of_voxel_.find(key);
+      if (found != slot_of_voxel_.end()) {
+        slot_of_point_.push_back(found->second);
+      } else if (model_voxels_.count(key)) {
+        slot_of_point_.push_back(uint32_t(newest_voxels_.size()));
+        slot_of_voxel_.emplace(key, uint32_t(newest_voxels_.size()));
+        newest_voxels_.push_back(key);
+      } else {
+        slot_of_point_.push_back(kNoVoxel);
+      }
+    }
+
+  // Each of its voxels' plane over the block.
   const double min_span_squared = (kMinSpan * options_.normal_radius_m) * (kMinSpan * options_.normal_radius_m);
   const double max_thickness_squared = kMaxThickness * kMaxThickness;
   constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
-  voxel_normals_.resize(voxel_keys_.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, voxel_keys_.size(), 256),
+  slot_normals_.resize(newest_voxels_.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, newest_voxels_.size(), 256),
                     [&](const tbb::blocked_range<std::size_t>& block) {
                       for (std::size_t v = block.begin(); v < block.end(); ++v) {
-                        const uint64_t key = voxel_keys_[v];
-                        const VoxelMoments& centre = voxel_moments_[v];
-                        // The block's moments about the centre voxel's mean.
+                        const VoxelKey& key = newest_voxels_[v];
+                        // The block's moments about the centre voxel's centre: a
+                        // neighbour's, about its own centre o away, shifted by o.
                         double count = 0.0;
                         Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-                        Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+                        Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();
                         for (int dx = -1; dx <= 1; ++dx)
-                          for (int dy = -1; dy <= 1; ++dy) {
-                            // z in the low bits: a column of three voxels is a run of keys.
-                            const uint64_t first = key + (uint64_t(int64_t(dx)) << (2 * kVoxelBits)) +
-                                                   (uint64_t(int64_t(dy)) << kVoxelBits) - 1;
-                            for (auto it = std::lower_bound(voxel_keys_.begin(), voxel_keys_.end(), first);
-                                 it != voxel_keys_.end() && *it <= first + 2; ++it) {
-                              const VoxelMoments& other = voxel_moments_[std::size_t(it - voxel_keys_.begin())];
-                              const Eigen::Vector3d offset = other.mean - centre.mean;
+                          for (int dy = -1; dy <= 1; ++dy)
+                            for (int dz = -1; dz <= 1; ++dz) {
+                              const auto it = model_voxels_.find(key + VoxelKey(dx, dy, dz));
+                              if (it == model_voxels_.end()) continue;
+                              const VoxelMoments& other = it->second;
+                              const Eigen::Vector3d offset = Eigen::Vector3d(dx, dy, dz) * voxel_size;
                               count += other.count;
-                              sum += other.count * offset;
-                              scatter += other.scatter + other.count * offset * offset.transpose();
+                              sum += other.sum + other.count * offset;
+                              outer += other.outer + other.sum * offset.transpose() + offset * other.sum.transpose() +
+                                       other.count * offset * offset.transpose();
                             }
-                          }
-                        voxel_normals_[v] = Eigen::Vector3f::Constant(kNaN);
+                        slot_normals_[v] = Eigen::Vector3f::Constant(kNaN);
                         if (count < 6.0) continue;
                         const Eigen::Vector3d mean = sum / count;
-                        const Eigen::Matrix3d covariance = scatter / count - mean * mean.transpose();
+                        const Eigen::Matrix3d covariance = outer / count - mean * mean.transpose();
                         Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
                         solver.computeDirect(covariance);
                         const Eigen::Vector3d eigenvalues = solver.eigenvalues();  // ascending
@@ -209,23 +197,26 @@ void LocalModel::computeModelNormals() {
                             !(eigenvalues(0) <= max_thickness_squared * eigenvalues(1)))
                           continue;
                         const Eigen::Vector3f normal = solver.eigenvectors().col(0).cast<float>().normalized();
-                        if (normal.allFinite()) voxel_normals_[v] = normal;
+                        if (normal.allFinite()) slot_normals_[v] = normal;
                       }
                     });
   // Where the model has no plane (a far wall's rings a metre apart), the
   // keyframe's own normal, if any, stays.
-  for (Level& level : newest.levels)
+  std::size_t first = 0;
+  for (Level& level : newest.levels) {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, level.points.size(), 4096),
                       [&](const tbb::blocked_range<std::size_t>& block) {
                         for (std::size_t i = block.begin(); i < block.end(); ++i) {
+                          const uint32_t slot = slot_of_point_[first + i];
+                          if (slot == kNoVoxel) continue;
+                          const Eigen::Vector3f& normal = slot_normals_[slot];
                           const Eigen::Vector3f& point = level.points[i];
-                          const auto it = std::lower_bound(voxel_keys_.begin(), voxel_keys_.end(), keyOf(point));
-                          if (it == voxel_keys_.end() || *it != keyOf(point)) continue;
-                          const Eigen::Vector3f& normal = voxel_normals_[std::size_t(it - voxel_keys_.begin())];
                           if (normal.allFinite())
                             level.normals[i] = normal.dot(point) > 0.0f ? Eigen::Vector3f(-normal) : normal;
                         }
                       });
+    first += level.points.size();
+  }
 }
 
 void LocalModel::render(const LidarModel& model, const Eigen::Isometry3d& odom_from_view,

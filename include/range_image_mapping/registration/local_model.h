@@ -8,9 +8,11 @@
 // between beam rings), z-buffered nearest first as the sensor would.
 #pragma once
 
+#include "range_image_mapping/mapping/voxel_block_grid.h"
 #include "range_image_mapping/normal_map.h"
 
 #include <Eigen/Geometry>
+#include <tsl/robin_map.h>
 
 #include <cstdint>
 #include <deque>
@@ -82,19 +84,21 @@ class LocalModel {
 
   LocalModelOptions options_;
   std::deque<Keyframe> keyframes_;
-  // computeModelNormals: the finest level's points of every keyframe in the
-  // newest one's frame, sorted by voxel, and each voxel's run of them.
-  std::vector<Eigen::Vector3f> grid_points_;
-  std::vector<std::pair<uint64_t, uint32_t>> grid_order_;
-  std::vector<std::pair<uint32_t, uint32_t>> voxel_runs_;
-  std::vector<uint64_t> voxel_keys_;
+  // computeModelNormals: the finest level's points of every keyframe, in the
+  // newest one's frame, as moments (about the voxel's centre) per voxel.
   struct VoxelMoments {
-    double count;
-    Eigen::Vector3d mean;
-    Eigen::Matrix3d scatter;  // sum of (p - mean)(p - mean)^T
+    double count = 0.0;
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();  // sum of d d^T
   };
-  std::vector<VoxelMoments> voxel_moments_;
-  std::vector<Eigen::Vector3f> voxel_normals_;  // NaN where the block is no plane
+  using VoxelKey = mapping::BlockKey;
+  tsl::robin_map<VoxelKey, VoxelMoments, mapping::BlockKeyHash> model_voxels_;
+  // The newest keyframe's voxels, each level's points' voxel (concatenated),
+  // and each voxel's plane normal (NaN where the block is no plane).
+  tsl::robin_map<VoxelKey, uint32_t, mapping::BlockKeyHash> slot_of_voxel_;
+  std::vector<VoxelKey> newest_voxels_;
+  std::vector<uint32_t> slot_of_point_;
+  std::vector<Eigen::Vector3f> slot_normals_;
   // Per level pixel: the nearest range's bits, then the winning point's
   // number (atomic compare-and-swap minimums); per point its pixel and range.
   mutable std::vector<std::vector<uint32_t>> nearest_, winner_;
