@@ -1,4 +1,5 @@
 #include "range_image_mapping/mapping/mesh_level_of_detail.h"
+#include "range_image_mapping/lattice_key.h"
 
 #include <algorithm>
 #include <array>
@@ -11,13 +12,6 @@
 
 namespace range_image_mapping::mapping {
 namespace {
-
-struct CellHash {
-  std::size_t operator()(const Eigen::Vector3i& cell) const {
-    return std::size_t(cell.x()) * 73856093u ^ std::size_t(cell.y()) * 19349663u ^
-           std::size_t(cell.z()) * 83492791u;
-  }
-};
 
 struct TriangleHash {
   std::size_t operator()(const std::array<int, 3>& corners) const {
@@ -51,7 +45,7 @@ TriangleMesh clusterVertices(const TriangleMesh& mesh, double cell_size_m,
   };
   // Each input vertex's cluster, clusters in order of first appearance; a
   // vertex on the border is a cluster of its own.
-  std::unordered_map<Eigen::Vector3i, int, CellHash> cluster_of_cell;
+  std::unordered_map<Eigen::Vector3i, int, LatticeKeyHash> cluster_of_cell;
   std::vector<int> cluster_of_vertex(mesh.vertices.size());
   std::vector<Eigen::Vector3d> position_sums, normal_sums;
   std::vector<double> intensity_sums;
@@ -122,7 +116,7 @@ int levelForDistance(double distance_m, const LevelOfDetailOptions& options) {
   return std::clamp(level, 0, options.max_level);
 }
 
-std::size_t MeshLevelOfDetail::KeyHash::operator()(const Key& key) const { return CellHash()(key); }
+std::size_t MeshLevelOfDetail::KeyHash::operator()(const Key& key) const { return LatticeKeyHash()(key); }
 
 MeshLevelOfDetail::MeshLevelOfDetail(LevelOfDetailOptions options) : options_(options) { options_.validate(); }
 

@@ -9,6 +9,8 @@
 // neighbours to close the seams.
 #pragma once
 
+#include "range_image_mapping/lattice_key.h"
+
 #include <Eigen/Core>
 
 #include <cstddef>
@@ -38,16 +40,8 @@ struct VoxelBlockGridOptions {
   void validate() const;
 };
 
-using BlockKey = Eigen::Vector3i;
-
-struct BlockKeyHash {
-  std::size_t operator()(const BlockKey& key) const {
-    // Large primes (Teschner et al. spatial hashing), mixed as 64 bits.
-    return std::size_t(uint64_t(int64_t(key.x())) * 73856093ull ^
-                       uint64_t(int64_t(key.y())) * 19349669ull ^
-                       uint64_t(int64_t(key.z())) * 83492791ull);
-  }
-};
+using BlockKey = LatticeKey;
+using BlockKeyHash = LatticeKeyHash;
 
 struct VoxelBlock {
   BlockKey key = BlockKey::Zero();

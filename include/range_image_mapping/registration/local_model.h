@@ -8,7 +8,7 @@
 // between beam rings), z-buffered nearest first as the sensor would.
 #pragma once
 
-#include "range_image_mapping/mapping/voxel_block_grid.h"
+#include "range_image_mapping/lattice_key.h"
 #include "range_image_mapping/normal_map.h"
 
 #include <Eigen/Geometry>
@@ -91,11 +91,11 @@ class LocalModel {
     Eigen::Vector3d sum = Eigen::Vector3d::Zero();
     Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();  // sum of d d^T
   };
-  using VoxelKey = mapping::BlockKey;
-  tsl::robin_map<VoxelKey, VoxelMoments, mapping::BlockKeyHash> model_voxels_;
+  using VoxelKey = LatticeKey;
+  tsl::robin_map<VoxelKey, VoxelMoments, LatticeKeyHash> model_voxels_;
   // The newest keyframe's voxels, each level's points' voxel (concatenated),
   // and each voxel's plane normal (NaN where the block is no plane).
-  tsl::robin_map<VoxelKey, uint32_t, mapping::BlockKeyHash> slot_of_voxel_;
+  tsl::robin_map<VoxelKey, uint32_t, LatticeKeyHash> slot_of_voxel_;
   std::vector<VoxelKey> newest_voxels_;
   std::vector<uint32_t> slot_of_point_;
   std::vector<Eigen::Vector3f> slot_normals_;
