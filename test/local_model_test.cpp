@@ -184,7 +184,7 @@ TEST(LocalModel, NormalsFromTheModelFindTheFloorBetweenASparseSensorsRings) {
 // must take its points out of the later keyframes' normals: keyframes of a
 // tilted floor come and go before flat ones, and the model that saw them
 // must give the normals of one that never did.
-TEST(LocalModel, NormalsKeptBetweenKeyframesMatchAModelBuiltAfresh) {
+TEST(LocalModel, NormalsDependOnlyOnTheKeyframesHeld) {
   const std::vector<int> strides{2, 1};
   const std::vector<VertexNormalMap> flat = pyramid(floorScan(), strides);
   const std::vector<VertexNormalMap> tilted = pyramid(floorScan(float(15.0 * kDegree)), strides);

@@ -7,6 +7,7 @@
 #include "range_image_mapping/ouster_packet.h"
 #include "range_image_mapping/registration/projective_icp.h"
 #include "range_image_mapping/scan_motion.h"
+#include "range_image_mapping/sensor_catalog.h"
 #include "range_image_mapping/simulation/lidar_simulator.h"
 #include "range_image_mapping/simulation/mesh_primitives.h"
 #include "range_image_mapping/simulation/scene_generator.h"
@@ -219,6 +220,31 @@ TEST(DegenerateRegistration, SinglePlaneHasALargeConditionNumber) {
   EXPECT_NEAR(result.target_from_source.translation().z(), -0.05, 0.005);
   // The unconstrained ones stay where they started instead of drifting.
   EXPECT_LT(result.target_from_source.translation().head<2>().norm(), 0.01);
+}
+
+// The area weight's cap follows the target sensor's row spacing d (0.0045 /
+// d^2): a VLP-16 (2 deg rows) and an HDL-32E (1.33 deg) get a lower cap, the
+// dense sensors keep the option's 25 m, and a new target sensor sets it anew.
+TEST(AreaWeight, CapFollowsTheTargetSensorsRowSpacing) {
+  const auto capFor = [](const std::string& name) {
+    const std::optional<LidarIntrinsics> intrinsics = catalogSensor(name);
+    EXPECT_TRUE(intrinsics) << name;
+    if (!intrinsics) return -1.0;
+    ProjectiveIcp icp;
+    icp.setTarget(RangeImage(std::make_shared<const LidarModel>(*intrinsics)));
+    return icp.areaWeightRange();
+  };
+  const double degree = M_PI / 180.0;
+  EXPECT_NEAR(capFor("VLP-16"), 0.0045 / std::pow(2.0 * degree, 2), 0.05);
+  EXPECT_LT(capFor("HDL-32E"), 10.0);
+  EXPECT_DOUBLE_EQ(capFor("VLP-32C"), 25.0);
+  EXPECT_DOUBLE_EQ(capFor("Pandar64"), 25.0);
+  ProjectiveIcp icp;
+  icp.setTarget(RangeImage(std::make_shared<const LidarModel>(*catalogSensor("VLP-16"))));
+  const double sparse = icp.areaWeightRange();
+  icp.setTarget(RangeImage(std::make_shared<const LidarModel>(*catalogSensor("Pandar64"))));
+  EXPECT_LT(sparse, icp.areaWeightRange());
+  EXPECT_DOUBLE_EQ(icp.areaWeightRange(), 25.0);
 }
 
 TEST(DegenerateRegistration, EmptySourceGivesNoInliersAndTheInitialPose) {

@@ -227,7 +227,7 @@ class KernelWeight {
 // the 25 m default.
 constexpr double kAreaWeightSpacing_m_rad2 = 0.0045;
 
-double areaWeightRange(double max_range_m, const LidarModel& model) {
+double sparseRowAreaWeightRange(double max_range_m, const LidarModel& model) {
   if (!(max_range_m > 0.0)) return 0.0;
   std::vector<double> spacing;
   const std::vector<double>& altitude = model.intrinsics().altitude_rad;
@@ -244,11 +244,10 @@ double areaWeightRange(double max_range_m, const LidarModel& model) {
 NormalEquations accumulate(const std::vector<Eigen::Vector3f>& points, const std::vector<Eigen::Vector3f>& normals,
                            const std::vector<int>& columns, const ColumnMotion* transforms, bool per_column,
                            const LidarModel& target_model, const TargetArrays& target_arrays,
-                           const RegistrationOptions& options, double gate_m) {
+                           const RegistrationOptions& options, double area_weight_range_m, double gate_m) {
   const float max_distance_squared = float(gate_m * gate_m);
   const float min_cosine = float(options.min_normal_cosine);
   const KernelWeight weight_of(options.kernel);
-  const double area_weight_range_m = areaWeightRange(options.area_weight_max_range_m, target_model);
   const bool area_weighted = area_weight_range_m > 0.0;
   const float max_range_squared = float(area_weight_range_m * area_weight_range_m);
 
@@ -421,6 +420,7 @@ void ProjectiveIcp::setTargetModel(const LidarModelConstPtr& model) {
   target_index_tables_.resize(target_levels_.size());
   for (std::size_t level = 0; level < target_levels_.size(); ++level)
     target_index_tables_[level].build(target_levels_[level], model->rows(), model->columns());
+  if (model != target_model_) area_weight_range_m_ = sparseRowAreaWeightRange(options_.area_weight_max_range_m, *model);
   target_model_ = model;
 }
 
@@ -550,7 +550,7 @@ RegistrationResult ProjectiveIcp::alignSource(const Eigen::Isometry3d& initial_t
         ColumnMotion rigid;
         rigid << rotation, translation;
         last = accumulate(source.points, source.normals, source.columns, &rigid, false, *target_model_,
-                          target_arrays, options_, gate_m);
+                          target_arrays, options_, area_weight_range_m_, gate_m);
       } else {
         column_transforms_.resize(column_motion.size());
         for (std::size_t u = 0; u < column_motion.size(); ++u) {
@@ -558,7 +558,7 @@ RegistrationResult ProjectiveIcp::alignSource(const Eigen::Isometry3d& initial_t
           column_transforms_[u].col(3) = rotation * column_motion[u].col(3) + translation;
         }
         last = accumulate(source.points, source.normals, source.columns, column_transforms_.data(), true,
-                          *target_model_, target_arrays, options_, gate_m);
+                          *target_model_, target_arrays, options_, area_weight_range_m_, gate_m);
       }
       ++result.iterations;
       if (last.inliers < 6) break;  // nothing to solve for; the pose stays

@@ -48,7 +48,7 @@ struct RegistrationOptions {
   // range (and equally beyond it): the static world, far and wide, then
   // outweighs a near object that fills many pixels. 0: every pair alike.
   // On a sensor with sparse rows the registration lowers it further, from
-  // the target model's beam spacing (areaWeightRange in projective_icp.cpp).
+  // the target model's beam spacing (ProjectiveIcp::areaWeightRange).
   double area_weight_max_range_m = 25.0;
   RobustKernel kernel;
   NormalMapOptions normals;
@@ -144,6 +144,9 @@ class ProjectiveIcp {
                                  const std::vector<ColumnMotion>& column_motion = {}) const;
 
   const RegistrationOptions& options() const { return options_; }
+  // The area weight's cap in use with the current target's sensor: the
+  // option, lowered on a sensor with sparse rows (0 before any target).
+  double areaWeightRange() const { return area_weight_range_m_; }
 
  private:
   // One level's source pixels with normals, and the full-resolution column
@@ -157,6 +160,7 @@ class ProjectiveIcp {
 
   RegistrationOptions options_;
   LidarModelConstPtr target_model_;
+  double area_weight_range_m_ = 0.0;  // from the target model's beam spacing, once per target sensor
   std::vector<VertexNormalMap> target_levels_;  // one per options_.strides entry
   std::vector<LevelPixelTables> target_index_tables_;  // one per options_.strides entry
   // Reused between calls (no per-frame allocation in steady state).
