@@ -72,7 +72,10 @@ TEST_F(OdometryCommand, AKittiFolderTakesASensorFile) {
       rim("odometry " + path("k") + " --kitti --sensor " + path("sensor.yaml") + " --out " + path("k/est.txt"));
   // Two beams see almost nothing of a 64-beam scan: the health says so.
   EXPECT_NE(run.err.find("degenerate"), std::string::npos) << run.err;
-  EXPECT_NE(test::readText(path("k/est_summary.json")).find("\"frames\" : 3"), std::string::npos);
+  const std::string summary = test::readText(path("k/est_summary.json"));
+  EXPECT_NE(summary.find("\"frames\" : 3"), std::string::npos);
+  // Rows 10 deg apart: the area weight's cap in use is 0.0045 / d^2, not the 25 m option.
+  EXPECT_NE(summary.find("\"area_weight_range_in_use_m\" : 0.1477"), std::string::npos) << summary;
 }
 
 // --sensor takes a catalog name as well as a file: KITTI's HDL-64E by name is
@@ -84,6 +87,8 @@ TEST_F(OdometryCommand, ANamedSensorIsTheCatalogModel) {
   test::RunResult run = rim("odometry " + path("n") + " --kitti --sensor hdl-64e --out " + path("n/named.txt"));
   ASSERT_EQ(run.exit_code, 0) << run.err;
   EXPECT_EQ(test::readText(path("n/named.txt")), test::readText(path("n/default.txt")));
+  // The HDL-64E's rows are dense enough for the whole 25 m cap.
+  EXPECT_NE(test::readText(path("n/named_summary.json")).find("\"area_weight_range_in_use_m\" : 25"), std::string::npos);
   run = rim("odometry " + path("n") + " --kitti --sensor VLP-99 --out " + path("n/unknown.txt"));
   EXPECT_NE(run.exit_code, 0);
   EXPECT_NE(run.err.find("VLP-99"), std::string::npos) << run.err;

@@ -227,7 +227,10 @@ class KernelWeight {
 // the 25 m default.
 constexpr double kAreaWeightSpacing_m_rad2 = 0.0045;
 
-double sparseRowAreaWeightRange(double max_range_m, const LidarModel& model) {
+}  // namespace
+
+double areaWeightRange(const RegistrationOptions& options, const LidarModel& model) {
+  const double max_range_m = options.area_weight_max_range_m;
   if (!(max_range_m > 0.0)) return 0.0;
   std::vector<double> spacing;
   const std::vector<double>& altitude = model.intrinsics().altitude_rad;
@@ -237,6 +240,8 @@ double sparseRowAreaWeightRange(double max_range_m, const LidarModel& model) {
   const double d = spacing[spacing.size() / 2];
   return d > 0.0 ? std::min(max_range_m, kAreaWeightSpacing_m_rad2 / (d * d)) : max_range_m;
 }
+
+namespace {
 
 // Pairs of one iteration (paper eq. 5-6) and their point-to-plane normal
 // equations, in one parallel pass over the source points (moved by the
@@ -420,7 +425,7 @@ void ProjectiveIcp::setTargetModel(const LidarModelConstPtr& model) {
   target_index_tables_.resize(target_levels_.size());
   for (std::size_t level = 0; level < target_levels_.size(); ++level)
     target_index_tables_[level].build(target_levels_[level], model->rows(), model->columns());
-  if (model != target_model_) area_weight_range_m_ = sparseRowAreaWeightRange(options_.area_weight_max_range_m, *model);
+  if (model != target_model_) area_weight_range_m_ = registration::areaWeightRange(options_, *model);
   target_model_ = model;
 }
 

@@ -79,7 +79,7 @@ int runOdometry(const OdometryCommandOptions& options) {
   summary["poses"] = Json::UInt64(poses.size());
   const Json::Value health_json = health.json();
   for (const std::string& key : health_json.getMemberNames()) summary[key] = health_json[key];
-  const Json::Value odometry_json = options.odometry.json();
+  const Json::Value odometry_json = options.odometry.json(recording.model.get());
   for (const std::string& key : odometry_json.getMemberNames()) summary[key] = odometry_json[key];
   summary["frame"] = options.frame == "sensor" ? "os_sensor" : recording.frame;
   summary["step_seconds_mean"] = mean_seconds;

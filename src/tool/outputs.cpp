@@ -50,7 +50,7 @@ registration::OdometryOptions OdometryCommandLine::options() const {
   return options;
 }
 
-Json::Value OdometryCommandLine::json() const {
+Json::Value OdometryCommandLine::json(const LidarModel* sensor) const {
   Json::Value json;
   json["deskew"] = !no_deskew;
   json["deskew_passes"] = deskew_passes;
@@ -59,6 +59,7 @@ Json::Value OdometryCommandLine::json() const {
   json["model_keyframes"] = model_keyframes;
   json["moving_margin_m"] = moving_margin_m;
   json["area_weight_max_range_m"] = area_weight_max_range_m;
+  if (sensor) json["area_weight_range_in_use_m"] = registration::areaWeightRange(options().registration, *sensor);
   json["keyframe_distance_m"] = keyframe_distance_m;
   json["keyframe_angle_deg"] = keyframe_angle_deg;
   json["model_normal_radius_m"] = model_normal_radius_m;

@@ -342,7 +342,7 @@ int runPipeline(RunCommandOptions options, const Command& command) {
   report["interrupted"] = bool(interrupted);
   report["frames"] = run.frames;
   report["poses"] = Json::UInt64(run.poses.size());
-  report["odometry"] = options.odometry.json();
+  report["odometry"] = options.odometry.json(recording.model.get());
   const Json::Value health = run.health.json();
   for (const std::string& key : health.getMemberNames()) report["odometry"][key] = health[key];
   report["mapping"] = mapOptionsJson(options.map, options.odometry.options().deskew);
