@@ -71,8 +71,14 @@ struct ActivationCells {
   int cell_voxels = 1;   // voxels per cell edge
   int cells_per_edge = 1;  // 1, 2 or 4
   int shift = 0;           // log2(cells_per_edge): cell -> block by arithmetic shift
-  // Per voxel of a block: the cells whose activation selects it.
+  // Per voxel of a block: the cells whose activation selects it, and its
+  // lattice coordinates (i, j, k) as floats.
   std::vector<CellMask> selecting_cells;
+  std::vector<Eigen::Vector3f> lattice;
+  // Per row of voxels along the block's x axis (index j + edge * k): the
+  // cells that select any voxel of the row, so that a row no activated cell
+  // selects is passed over whole.
+  std::vector<CellMask> row_selecting_cells;
 
   void configure(int edge) {
     if (edge == block_edge) return;
@@ -82,6 +88,8 @@ struct ActivationCells {
     cell_voxels = edge / cells_per_edge;
     shift = cells_per_edge == 4 ? 2 : (cells_per_edge == 2 ? 1 : 0);
     selecting_cells.assign(std::size_t(edge) * edge * edge, 0);
+    lattice.resize(selecting_cells.size());
+    row_selecting_cells.assign(std::size_t(edge) * edge, 0);
     // The cells of one axis coordinate: its own, and the one below for the
     // first layer of a cell.
     const auto cellsOf = [&](int x, int* cells) {
@@ -101,6 +109,8 @@ struct ActivationCells {
             for (int b = 0; b < 3; ++b)
               for (int c = 0; c < 3; ++c)
                 selecting_cells[v] |= CellMask(1) << (ci[a] + cells_per_edge * (cj[b] + cells_per_edge * ck[c]));
+          lattice[v] = Eigen::Vector3f(float(i), float(j), float(k));
+          row_selecting_cells[v / edge] |= selecting_cells[v];
         }
   }
   double cellSize(double voxel_size) const { return voxel_size * cell_voxels; }
@@ -783,16 +793,19 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
       // Only the voxels of the cells activated.
       const CellMask activated = work.touched_cells[b];
       const CellMask* selecting_cells = cells.selecting_cells.data();
+      const Eigen::Vector3f* voxel_lattice = cells.lattice.data();
+      const std::size_t voxel_rows = std::size_t(edge) * edge;
       std::size_t count = 0;
-      for (std::size_t v = 0, k = 0; k < std::size_t(edge); ++k)
-        for (std::size_t j = 0; j < std::size_t(edge); ++j)
-          for (std::size_t i = 0; i < std::size_t(edge); ++i, ++v) {
-            if (!(selecting_cells[v] & activated)) continue;
-            buffers.voxel_index[count] = uint32_t(v);
-            buffers.lattice[count] = Eigen::Vector3f(float(i), float(j), float(k));
-            buffers.points[count] = first + lattice_steps * buffers.lattice[count];
-            ++count;
-          }
+      for (std::size_t row = 0; row < voxel_rows; ++row) {
+        if (!(cells.row_selecting_cells[row] & activated)) continue;
+        for (std::size_t v = row * edge, row_end = v + edge; v < row_end; ++v) {
+          if (!(selecting_cells[v] & activated)) continue;
+          buffers.voxel_index[count] = uint32_t(v);
+          buffers.lattice[count] = voxel_lattice[v];
+          buffers.points[count] = first + lattice_steps * voxel_lattice[v];
+          ++count;
+        }
+      }
       if (moving) {
         projectIntoMovingSensor(model, sweep_motion, first, lattice_steps, edge, count, buffers);
       } else {
