@@ -281,8 +281,10 @@ inline float encoderAngleOf(float x, float y, float azimuth_offset, float sin_de
 // range encoderAngleOf returns; column_per_radian is -W / (2 pi).
 inline int nearestColumn(float encoder_angle, float column_per_radian, float columns) {
   float u = encoder_angle * column_per_radian + 0.5f;
-  u += columns * static_cast<float>(u < 0.0f);  // arithmetic: the sign is random per point
-  u -= columns * static_cast<float>(u >= columns);
+  // Arithmetic, as bit masks (the sign is random per point; a product with
+  // the comparison would be a branch that keeps the loops from vectorising).
+  u += zeroUnless(columns, int(u < 0.0f));
+  u -= zeroUnless(columns, int(u >= columns));
   const int column = static_cast<int>(u);
   return column - static_cast<int>(columns) * (column >= static_cast<int>(columns));  // seam
 }
@@ -333,7 +335,8 @@ void LidarModel::projectMany(const Eigen::Vector3f* points, std::size_t count, P
   alignas(32) float x[kBlock], y[kBlock], rho_squared[kBlock], rho[kBlock], dz[kBlock];
   alignas(32) float sin_elevation[kBlock], offset_cos[kBlock], offset_sin[kBlock], offset[kBlock];
   alignas(32) float ray_length[kBlock], encoder_angle[kBlock], cell_low[kBlock], cell_high[kBlock];
-  alignas(32) int row[kBlock], same_row[kBlock];
+  alignas(32) float range[kBlock];
+  alignas(32) int row[kBlock], same_row[kBlock], column[kBlock];
   const int last_bin = static_cast<int>(inverse_altitude_.size()) - 1;
   const float r0 = beam_origin_radius_;
   const float nearest_rho = kNearestAxisDistance * r0;
@@ -382,6 +385,13 @@ void LidarModel::projectMany(const Eigen::Vector3f* points, std::size_t count, P
       same_row[i] = int(r0 == 0.0f) | (int(sine >= accept_sin_low_) & int(sine <= accept_sin_high_) &
                                        int(sine >= cell_low[i]) & int(sine < cell_high[i]));
     }
+    // The pixels of the points kept (the angle of the others, possibly NaN
+    // or far out of range, is not converted).
+    for (std::size_t i = 0; i < n; ++i) {  // vectorised
+      column[i] = nearestColumn(zeroUnless(encoder_angle[i], int(row[i] >= 0) & same_row[i]), column_per_radian_,
+                                columns);
+      range[i] = ray_length[i] + beam_origin_norm_;
+    }
     for (std::size_t i = 0; i < n; ++i) {
       if (row[i] < 0) {
         hits[start + i] = 0;
@@ -394,8 +404,7 @@ void LidarModel::projectMany(const Eigen::Vector3f* points, std::size_t count, P
         continue;
       }
       hits[start + i] = 1;
-      pixels[start + i] = {nearestColumn(encoder_angle[i], column_per_radian_, columns), row[i],
-                           ray_length[i] + beam_origin_norm_};
+      pixels[start + i] = {column[i], row[i], range[i]};
     }
   }
 }
