@@ -387,10 +387,19 @@ void LidarModel::projectMany(const Eigen::Vector3f* points, std::size_t count, P
     }
     // The pixels of the points kept (the angle of the others, possibly NaN
     // or far out of range, is not converted).
+    int all_kept = 1;
     for (std::size_t i = 0; i < n; ++i) {  // vectorised
-      column[i] = nearestColumn(zeroUnless(encoder_angle[i], int(row[i] >= 0) & same_row[i]), column_per_radian_,
-                                columns);
+      const int kept = int(row[i] >= 0) & same_row[i];
+      all_kept &= kept;
+      column[i] = nearestColumn(zeroUnless(encoder_angle[i], kept), column_per_radian_, columns);
       range[i] = ray_length[i] + beam_origin_norm_;
+    }
+    if (all_kept) {  // the usual case: every point hits, on the row first found
+      for (std::size_t i = 0; i < n; ++i) {
+        hits[start + i] = 1;
+        pixels[start + i] = {column[i], row[i], range[i]};
+      }
+      continue;
     }
     for (std::size_t i = 0; i < n; ++i) {
       if (row[i] < 0) {
