@@ -121,15 +121,19 @@ class BlockMesher {
                           ~(all_negative & (all_negative >> 1)) & cube_bits;
         for (; active != 0; active &= active - 1) {
           const int x = __builtin_ctz(active);
-          const int base = paddedIndex(x, y, z);
-          int corner_signs = 0;
-          std::array<float, 8> value;
-          for (int c = 0; c < 8; ++c) {
-            value[c] = sdf_[base + corner_offset[c]];
-            corner_signs |= int(value[c] < 0.0f) << c;
+          // Corner c = x + 2 y + 4 z offset: two bits from each of the four rows.
+          const int corner_signs = int((negative_bits_[row] >> x) & 3u) |
+                                   int((negative_bits_[row + 1] >> x) & 3u) << 2 |
+                                   int((negative_bits_[row + padded_] >> x) & 3u) << 4 |
+                                   int((negative_bits_[row + padded_ + 1] >> x) & 3u) << 6;
+          int decisions = 0;
+          if (cases.ambiguousFaceCount(corner_signs) > 0) {  // few cubes: the values only then
+            const int base = paddedIndex(x, y, z);
+            std::array<float, 8> value;
+            for (int c = 0; c < 8; ++c) value[c] = sdf_[base + corner_offset[c]];
+            decisions = faceDecisions(cases, corner_signs, value);
           }
-          const MarchingCubesCases::Triangles triangles =
-              cases.triangles(corner_signs, faceDecisions(cases, corner_signs, value));
+          const MarchingCubesCases::Triangles triangles = cases.triangles(corner_signs, decisions);
           const Eigen::Vector3i cube(x, y, z);
           const auto vertexOnCubeEdge = [&](int cube_edge) {
             const CubeEdge& edge_of_cube = cases.edges()[cube_edge];
