@@ -11,9 +11,14 @@
 
 #include <Eigen/Geometry>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <cfloat>
 #include <cmath>
 #include <sstream>
 
@@ -39,6 +44,33 @@ std::string keyText(const BlockKey& key) {
   }();
   throw MappingError("marching cubes: block " + keyText(block.key) + " has " + std::to_string(name.second) + " " +
                      name.first + " values, expected " + std::to_string(voxels));
+}
+
+// Bit x of `observed` / `negative` for the run of voxels from `sdf` and
+// `weight` (run <= 32): observed means weight > 0, weight >= min_weight and
+// a finite SDF; negative means sdf < 0 (a NaN is neither). Four voxels per
+// comparison where SSE2 is there: this runs for every voxel a chunk reads.
+inline void voxelRowBits(const float* sdf, const float* weight, int run, float min_weight, uint32_t& observed,
+                         uint32_t& negative) {
+  uint32_t observed_bits = 0, negative_bits = 0;
+  int x = 0;
+#if defined(__SSE2__)
+  const __m128 zero = _mm_setzero_ps(), minimum = _mm_set1_ps(min_weight), largest = _mm_set1_ps(FLT_MAX);
+  const __m128 magnitude = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+  for (; x + 4 <= run; x += 4) {
+    const __m128 s = _mm_loadu_ps(sdf + x), w = _mm_loadu_ps(weight + x);
+    const __m128 is_observed = _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(w, zero), _mm_cmpge_ps(w, minimum)),
+                                          _mm_cmple_ps(_mm_and_ps(s, magnitude), largest));
+    observed_bits |= uint32_t(_mm_movemask_ps(is_observed)) << x;
+    negative_bits |= uint32_t(_mm_movemask_ps(_mm_cmplt_ps(s, zero))) << x;
+  }
+#endif
+  for (; x < run; ++x) {
+    observed_bits |= uint32_t(weight[x] > 0.0f && weight[x] >= min_weight && std::isfinite(sdf[x])) << x;
+    negative_bits |= uint32_t(sdf[x] < 0.0f) << x;
+  }
+  observed = observed_bits;
+  negative = negative_bits;
 }
 
 // Inline: it runs for a block and its 7 neighbours each time a block is meshed.
@@ -89,15 +121,19 @@ class BlockMesher {
                           ~(all_negative & (all_negative >> 1)) & cube_bits;
         for (; active != 0; active &= active - 1) {
           const int x = __builtin_ctz(active);
-          const int base = paddedIndex(x, y, z);
-          int corner_signs = 0;
-          std::array<float, 8> value;
-          for (int c = 0; c < 8; ++c) {
-            value[c] = sdf_[base + corner_offset[c]];
-            corner_signs |= int(value[c] < 0.0f) << c;
+          // Corner c = x + 2 y + 4 z offset: two bits from each of the four rows.
+          const int corner_signs = int((negative_bits_[row] >> x) & 3u) |
+                                   int((negative_bits_[row + 1] >> x) & 3u) << 2 |
+                                   int((negative_bits_[row + padded_] >> x) & 3u) << 4 |
+                                   int((negative_bits_[row + padded_ + 1] >> x) & 3u) << 6;
+          int decisions = 0;
+          if (cases.ambiguousFaceCount(corner_signs) > 0) {  // few cubes: the values only then
+            const int base = paddedIndex(x, y, z);
+            std::array<float, 8> value;
+            for (int c = 0; c < 8; ++c) value[c] = sdf_[base + corner_offset[c]];
+            decisions = faceDecisions(cases, corner_signs, value);
           }
-          const MarchingCubesCases::Triangles triangles =
-              cases.triangles(corner_signs, faceDecisions(cases, corner_signs, value));
+          const MarchingCubesCases::Triangles triangles = cases.triangles(corner_signs, decisions);
           const Eigen::Vector3i cube(x, y, z);
           const auto vertexOnCubeEdge = [&](int cube_edge) {
             const CubeEdge& edge_of_cube = cases.edges()[cube_edge];
@@ -145,7 +181,6 @@ class BlockMesher {
     with_intensity_ = grid.options().store_intensity;
     const std::size_t padded_voxels = std::size_t(padded_) * padded_ * padded_;
     sdf_.resize(padded_voxels);
-    observed_.resize(padded_voxels);
     if (with_intensity_) intensity_.resize(padded_voxels);
     vertex_of_edge_.resize(3 * std::size_t(edge_ + 1) * (edge_ + 1) * (edge_ + 1), -1);
     const std::size_t lattice_points = std::size_t(edge_ + 1) * (edge_ + 1) * (edge_ + 1);
@@ -181,7 +216,6 @@ class BlockMesher {
       const int run = end.x() - begin.x();
       // Raw pointers, one x run at a time: the compiler cannot tell the
       // stores below from the vectors' own members otherwise.
-      uint8_t* const observed = observed_.data();
       float* const sdf_out = sdf_.data();
       float* const intensity_out = with_intensity_ ? intensity_.data() : nullptr;
       const float* const sdf_in = source ? source->sdf.data() : nullptr;
@@ -190,22 +224,14 @@ class BlockMesher {
       for (int z = begin.z(); z < end.z(); ++z)
         for (int y = begin.y(); y < end.y(); ++y) {
           const int target = paddedIndex(begin.x(), y, z);
-          if (!source) {
-            std::fill(observed + target, observed + target + run, uint8_t(0));
-            continue;
-          }
+          if (!source) continue;  // its bits stay 0: unobserved
           const int voxel = edge_ * ((y - begin.y()) + edge_ * (z - begin.z()));
-          uint32_t observed_row = 0, negative_row = 0;
-          for (int x = 0; x < run; ++x) {
-            const float sdf = sdf_in[voxel + x], weight = weight_in[voxel + x];
-            const bool is_observed = weight > 0.0f && weight >= min_weight && std::isfinite(sdf);
-            observed[target + x] = is_observed;
-            sdf_out[target + x] = sdf;
-            observed_row |= uint32_t(is_observed) << x;
-            negative_row |= uint32_t(sdf < 0.0f) << x;
-            has_negative = has_negative || (is_observed && sdf < 0.0f);
-            has_positive = has_positive || (is_observed && sdf >= 0.0f);
-          }
+          uint32_t observed_row, negative_row;
+          voxelRowBits(sdf_in + voxel, weight_in + voxel, run, min_weight, observed_row, negative_row);
+          std::copy(sdf_in + voxel, sdf_in + voxel + run, sdf_out + target);
+          // Observed values are finite: not negative means >= 0.
+          has_negative = has_negative || (observed_row & negative_row) != 0;
+          has_positive = has_positive || (observed_row & ~negative_row) != 0;
           observed_bits_[y + padded_ * z] |= observed_row << begin.x();
           negative_bits_[y + padded_ * z] |= negative_row << begin.x();
           if (intensity_out) std::copy(intensity_in + voxel, intensity_in + voxel + run, intensity_out + target);
@@ -222,17 +248,16 @@ class BlockMesher {
   // without an observed voxel has none either.
   bool mayCrossZero(const VoxelBlock& block, float min_weight) const {
     int signs = 0;  // bit 0: an observed negative value, bit 1: an observed non-negative one
-    const auto look = [&](const float* sdf, const float* weight, int begin, int end, int step) {
-      int negative = 0, positive = 0;
-      for (int i = begin; i < end; i += step) {
-        const int observed = int(weight[i] > 0.0f) & int(weight[i] >= min_weight) & int(std::isfinite(sdf[i]));
-        negative |= observed & int(sdf[i] < 0.0f);
-        positive |= observed & int(sdf[i] >= 0.0f);
+    const auto look = [&](const float* sdf, const float* weight, int begin, int end) {
+      for (int i = begin; i < end; i += 32) {
+        uint32_t observed, negative;
+        voxelRowBits(sdf + i, weight + i, std::min(32, end - i), min_weight, observed, negative);
+        // Observed values are finite: not negative means >= 0.
+        signs |= int((observed & negative) != 0) | int((observed & ~negative) != 0) << 1;
       }
-      signs |= negative | (positive << 1);
     };
     const int voxels = edge_ * edge_ * edge_;
-    look(block.sdf.data(), block.weight.data(), 0, voxels, 1);
+    look(block.sdf.data(), block.weight.data(), 0, voxels);
     if (signs == 3) return true;
     if (signs == 0) return false;
     for (int neighbour = 1; neighbour < 8; ++neighbour) {
@@ -246,7 +271,7 @@ class BlockMesher {
       for (int z = 0; z < z_end; ++z)
         for (int y = 0; y < y_end; ++y) {
           const int row = edge_ * (y + edge_ * z);
-          look(sdf, weight, row, row + x_end, 1);
+          look(sdf, weight, row, row + x_end);
         }
       if (signs == 3) return true;
     }
@@ -279,11 +304,16 @@ class BlockMesher {
     const int index = paddedIndex(point.x(), point.y(), point.z());
     const int step = stride_[axis];
     const bool lower_face = point[axis] == 0 || point[axis] == edge_;
-    const bool minus = !lower_face && observed_[index - step];
-    const bool plus = observed_[index + step];
+    const auto observedAt = [&](int offset) {
+      Eigen::Vector3i at = point;
+      at[axis] += offset;
+      return ((observed_bits_[at.y() + padded_ * at.z()] >> at.x()) & 1u) != 0;
+    };
+    const bool minus = !lower_face && observedAt(-1);
+    const bool plus = observedAt(1);
     if (minus && plus) return 0.5f * (sdf_[index + step] - sdf_[index - step]);
     if (plus) {
-      if (observed_[index + 2 * step])  // second order, as accurate as the central difference
+      if (observedAt(2))  // second order, as accurate as the central difference
         return 0.5f * (-3.0f * sdf_[index] + 4.0f * sdf_[index + step] - sdf_[index + 2 * step]);
       return sdf_[index + step] - sdf_[index];
     }
@@ -379,7 +409,6 @@ class BlockMesher {
   std::array<int, 3> stride_{};
   bool with_intensity_ = false;
   std::vector<float> sdf_, intensity_;
-  std::vector<uint8_t> observed_;
   // Per padded (y, z) row, bit x: the voxel is observed / its SDF is negative.
   std::vector<uint32_t> observed_bits_, negative_bits_;
   std::array<const VoxelBlock*, 8> neighbours_{};  // the block and its +1 neighbours (nullptr: absent)
