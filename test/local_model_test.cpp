@@ -11,6 +11,7 @@
 #include "test_data.h"
 
 #include <gtest/gtest.h>
+#include <tbb/task_arena.h>
 
 #include <cmath>
 
@@ -213,6 +214,41 @@ TEST(LocalModel, NormalsDependOnlyOnTheKeyframesHeld) {
         ASSERT_LT((kept[l].normals[p] - built[l].normals[p]).norm(), 1e-5f)
             << "stride " << strides[l] << " pixel " << p << ": " << kept[l].normals[p].transpose() << " against "
             << built[l].normals[p].transpose();
+  }
+}
+
+// The model's normals are summed on several threads: the same keyframes
+// must give bit-identical normals on one thread and on four.
+TEST(LocalModel, NormalsFromTheModelDoNotDependOnTheThreads) {
+  const std::vector<int> strides{2, 1};
+  const std::vector<VertexNormalMap> flat = pyramid(floorScan(), strides);
+  const std::vector<VertexNormalMap> tilted = pyramid(floorScan(float(3.0 * kDegree)), strides);
+  const auto renderWith = [&](int threads) {
+    std::vector<VertexNormalMap> rendered;
+    tbb::task_arena(threads).execute([&] {
+      LocalModel model(LocalModelOptions{4, 0.0, 0.0, 1.0});
+      Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+      for (int k = 0; k < 4; ++k) {
+        pose.translation() = Eigen::Vector3d(0.37 * k, 0.11 * k, 0.0);
+        model.add(k % 2 ? tilted : flat, pose, false);
+      }
+      model.render(*sparseSensor(), pose, rendered);
+    });
+    return rendered;
+  };
+  const std::vector<VertexNormalMap> one = renderWith(1), four = renderWith(4);
+  ASSERT_EQ(one.size(), strides.size());
+  ASSERT_EQ(four.size(), strides.size());
+  for (std::size_t l = 0; l < strides.size(); ++l) {
+    EXPECT_GT(pixelsWithNormals(one[l]), validPixels(flat[l]) / 5) << "stride " << strides[l];
+    ASSERT_EQ(one[l].normals.size(), four[l].normals.size());
+    for (std::size_t p = 0; p < one[l].normals.size(); ++p)
+      for (int axis = 0; axis < 3; ++axis) {
+        const float a = one[l].normals[p][axis], b = four[l].normals[p][axis];
+        ASSERT_TRUE(a == b || (std::isnan(a) && std::isnan(b)))
+            << "stride " << strides[l] << " pixel " << p << ": " << one[l].normals[p].transpose() << " against "
+            << four[l].normals[p].transpose();
+      }
   }
 }
 

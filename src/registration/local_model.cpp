@@ -101,6 +101,19 @@ namespace {
 constexpr double kMinSpan = 0.15, kMaxThickness = 0.3;
 constexpr uint32_t kNoVoxel = std::numeric_limits<uint32_t>::max();
 
+// floor(value) for finite values within int's range, without a call to floorf.
+int floorToInt(float value) {
+  const int truncated = int(value);
+  return truncated - (value < float(truncated));
+}
+
+// A voxel's map: high bits of its hash mixed again (the maps index their
+// buckets by the low bits, which must stay spread within each map).
+uint8_t partitionOf(const LatticeKey& key) {
+  static_assert(LocalModel::kVoxelPartitions == 8, "three bits");
+  return uint8_t((uint64_t(LatticeKeyHash()(key)) * 0x9E3779B97F4A7C15ull) >> 61);
+}
+
 }  // namespace
 
 // The neighbourhood of a point is the block of 3 x 3 x 3 voxels around its
@@ -114,32 +127,65 @@ void LocalModel::computeModelNormals() {
   Keyframe& newest = keyframes_.back();
   const Eigen::Isometry3d newest_from_odom = newest.odom_from_lidar.inverse();
   const auto keyOf = [&](const Eigen::Vector3f& point) {
-    return VoxelKey(int(std::floor(point.x() * inverse_size)), int(std::floor(point.y() * inverse_size)),
-                    int(std::floor(point.z() * inverse_size)));
+    return VoxelKey(floorToInt(point.x() * inverse_size), floorToInt(point.y() * inverse_size),
+                    floorToInt(point.z() * inverse_size));
   };
   const auto centreOf = [&](const VoxelKey& key) { return (key.cast<double>().array() + 0.5).matrix() * voxel_size; };
 
   // The finest level's points of every keyframe, in the newest one's frame,
   // summed per voxel; a run of points in one voxel (neighbouring pixels)
-  // takes one look-up.
-  model_voxels_.clear();
+  // takes one look-up. The voxels are split among kVoxelPartitions maps by
+  // their key, each summed on its own thread in the points' order, so that
+  // every voxel's sums are the same whatever the threads.
+  moved_points_.clear();
   for (const Keyframe& keyframe : keyframes_) {
     const Eigen::Isometry3f newest_from_keyframe = (newest_from_odom * keyframe.odom_from_lidar).cast<float>();
+    const std::vector<Eigen::Vector3f>& points = keyframe.levels.back().points;
+    const std::size_t first = moved_points_.size();
+    moved_points_.resize(first + points.size());
+    key_of_point_.resize(first + points.size());
+    partition_of_point_.resize(first + points.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 4096),
+                      [&](const tbb::blocked_range<std::size_t>& block) {
+                        for (std::size_t i = block.begin(); i < block.end(); ++i) {
+                          const Eigen::Vector3f moved = newest_from_keyframe * points[i];
+                          moved_points_[first + i] = moved;
+                          key_of_point_[first + i] = keyOf(moved);
+                          partition_of_point_[first + i] = partitionOf(key_of_point_[first + i]);
+                        }
+                      });
+  }
+  for (std::vector<uint32_t>& points : points_of_partition_) points.clear();
+  for (std::size_t i = 0; i < moved_points_.size(); ++i) points_of_partition_[partition_of_point_[i]].push_back(uint32_t(i));
+  tbb::parallel_for(std::size_t(0), kVoxelPartitions, [&](std::size_t partition) {
+    VoxelMap& voxels = model_voxels_[partition];
+    voxels.clear();
     VoxelMoments* moments = nullptr;  // valid until the next insertion, which looks up again
-    VoxelKey last_key;
-    for (const Eigen::Vector3f& point : keyframe.levels.back().points) {
-      const Eigen::Vector3f moved = newest_from_keyframe * point;
-      const VoxelKey key = keyOf(moved);
+    VoxelKey last_key = VoxelKey::Zero();
+    for (const uint32_t i : points_of_partition_[partition]) {
+      const Eigen::Vector3f& moved = moved_points_[i];
+      const VoxelKey& key = key_of_point_[i];
       if (!moments || key != last_key) {
-        moments = &model_voxels_[key];
+        moments = &voxels[key];
         last_key = key;
       }
       const Eigen::Vector3d d = moved.cast<double>() - centreOf(key);
       moments->count += 1.0;
       moments->sum += d;
-      moments->outer.noalias() += d * d.transpose();
+      // The lower triangle only: the plane fit reads no other.
+      moments->outer(0, 0) += d.x() * d.x();
+      moments->outer(1, 0) += d.y() * d.x();
+      moments->outer(2, 0) += d.z() * d.x();
+      moments->outer(1, 1) += d.y() * d.y();
+      moments->outer(2, 1) += d.z() * d.y();
+      moments->outer(2, 2) += d.z() * d.z();
     }
-  }
+  });
+  const auto findVoxel = [&](const VoxelKey& key) -> const VoxelMoments* {
+    const VoxelMap& voxels = model_voxels_[partitionOf(key)];
+    const auto found = voxels.find(key);
+    return found == voxels.end() ? nullptr : &found->second;
+  };
   // The newest keyframe's voxels (of every level's points) that hold points.
   slot_of_voxel_.clear();
   newest_voxels_.clear();
@@ -150,7 +196,7 @@ void LocalModel::computeModelNormals() {
       const auto found = slot_of_voxel_.find(key);
       if (found != slot_of_voxel_.end()) {
         slot_of_point_.push_back(found->second);
-      } else if (model_voxels_.count(key)) {
+      } else if (findVoxel(key)) {
         slot_of_point_.push_back(uint32_t(newest_voxels_.size()));
         slot_of_voxel_.emplace(key, uint32_t(newest_voxels_.size()));
         newest_voxels_.push_back(key);
@@ -176,9 +222,9 @@ void LocalModel::computeModelNormals() {
                         for (int dx = -1; dx <= 1; ++dx)
                           for (int dy = -1; dy <= 1; ++dy)
                             for (int dz = -1; dz <= 1; ++dz) {
-                              const auto it = model_voxels_.find(key + VoxelKey(dx, dy, dz));
-                              if (it == model_voxels_.end()) continue;
-                              const VoxelMoments& other = it->second;
+                              const VoxelMoments* found = findVoxel(key + VoxelKey(dx, dy, dz));
+                              if (!found) continue;
+                              const VoxelMoments& other = *found;
                               const Eigen::Vector3d offset = Eigen::Vector3d(dx, dy, dz) * voxel_size;
                               count += other.count;
                               sum += other.sum + other.count * offset;
@@ -188,6 +234,7 @@ void LocalModel::computeModelNormals() {
                         slot_normals_[v] = Eigen::Vector3f::Constant(kNaN);
                         if (count < 6.0) continue;
                         const Eigen::Vector3d mean = sum / count;
+                        // Lower triangle (as the moments): computeDirect reads no other.
                         const Eigen::Matrix3d covariance = outer / count - mean * mean.transpose();
                         Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
                         solver.computeDirect(covariance);

@@ -14,6 +14,7 @@
 #include <Eigen/Geometry>
 #include <tsl/robin_map.h>
 
+#include <array>
 #include <cstdint>
 #include <deque>
 #include <memory>
@@ -69,6 +70,9 @@ class LocalModel {
 
   const LocalModelOptions& options() const { return options_; }
 
+  // computeModelNormals sums the voxel moments in this many maps, in parallel.
+  static constexpr std::size_t kVoxelPartitions = 8;
+
  private:
   struct Level {
     int stride = 1;
@@ -85,14 +89,22 @@ class LocalModel {
   LocalModelOptions options_;
   std::deque<Keyframe> keyframes_;
   // computeModelNormals: the finest level's points of every keyframe, in the
-  // newest one's frame, as moments (about the voxel's centre) per voxel.
+  // newest one's frame, as moments (about the voxel's centre) per voxel, in
+  // maps by partitionOf(key).
   struct VoxelMoments {
     double count = 0.0;
     Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();  // sum of d d^T
+    Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();  // sum of d d^T, lower triangle
   };
   using VoxelKey = LatticeKey;
-  tsl::robin_map<VoxelKey, VoxelMoments, LatticeKeyHash> model_voxels_;
+  using VoxelMap = tsl::robin_map<VoxelKey, VoxelMoments, LatticeKeyHash>;
+  std::array<VoxelMap, kVoxelPartitions> model_voxels_;
+  // Those points (all keyframes, oldest first), their voxels and maps, and
+  // each map's points in that order.
+  std::vector<Eigen::Vector3f> moved_points_;
+  std::vector<VoxelKey> key_of_point_;
+  std::vector<uint8_t> partition_of_point_;
+  std::array<std::vector<uint32_t>, kVoxelPartitions> points_of_partition_;
   // The newest keyframe's voxels, each level's points' voxel (concatenated),
   // and each voxel's plane normal (NaN where the block is no plane).
   tsl::robin_map<VoxelKey, uint32_t, LatticeKeyHash> slot_of_voxel_;
