@@ -128,10 +128,10 @@ TEST(LocalModel, DropsTheOldestKeyframeAndReplacesAProvisionalOne) {
   EXPECT_THROW(LocalModel(LocalModelOptions{2, -1.0, 0.0}), std::invalid_argument);
 }
 
-// On a sensor with sparse rows the keyframes are a metre per degree of its
-// median beam spacing apart at least (a VLP-16's 2 deg: 2 m; an HDL-32E's
-// 1.33 deg: 1.33 m); the dense sensors keep the option's distance, and 0
-// (every scan a keyframe) stays 0.
+// On a sensor with rows a degree or more apart the keyframes are a metre per
+// degree of its median beam spacing apart at least (a VLP-16's 2 deg: 2 m;
+// an HDL-32E's 1.33 deg: 1.33 m); denser sensors keep the option's distance,
+// and 0 (every scan a keyframe) stays 0.
 TEST(LocalModel, KeyframeDistanceFollowsTheSensorsRowSpacing) {
   const LocalModelOptions options;  // 0.5 m
   const auto distanceFor = [&](const std::string& name) {

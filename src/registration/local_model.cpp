@@ -28,8 +28,10 @@ constexpr float kSurfaceThicknessShare = 0.01f;
 // range^2 d / height), so the planes fitted across them tilt with the
 // keyframes' attitude errors, and the odometry chains one error per
 // keyframe. Measured (issue 14): a VLP-16 (2 deg) drifts least with
-// keyframes about 2 m apart, the HDL-32E (1.33 deg) gains too; the HDL-64E,
-// Ouster, Pandar64 and VLP-32C (under 0.5 deg) keep the 0.5 m default.
+// keyframes about 2 m apart, the HDL-32E (1.33 deg) at 1.33 m (at 0.89 m its
+// RPE got worse); the OS-0-128 (0.7 deg) lost 0.3 mm ATE indoors at 0.72 m,
+// so sensors with rows under a degree apart keep the option's distance.
+constexpr double kSparseRowSpacing_rad = M_PI / 180.0;
 constexpr double kKeyframeDistancePerSpacing_m_rad = 180.0 / M_PI;  // a metre per degree
 
 // Positive floats order as their bit patterns.
@@ -65,7 +67,9 @@ Eigen::Isometry3d LocalModel::newestPose() const {
 
 double keyframeDistance(const LocalModelOptions& options, const LidarModel& model) {
   if (!(options.keyframe_distance_m > 0.0)) return 0.0;
-  return std::max(options.keyframe_distance_m, kKeyframeDistancePerSpacing_m_rad * model.intrinsics().medianRowSpacingRad());
+  const double d = model.intrinsics().medianRowSpacingRad();
+  if (d < kSparseRowSpacing_rad) return options.keyframe_distance_m;
+  return std::max(options.keyframe_distance_m, kKeyframeDistancePerSpacing_m_rad * d);
 }
 
 bool LocalModel::wantsKeyframe(const Eigen::Isometry3d& odom_from_lidar, const LidarModel& model) const {
