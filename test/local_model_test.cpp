@@ -4,9 +4,11 @@
 // KITTI raw scans (no ground truth) the odometry with the model gets the path
 // length an independent ICP chain and KISS-ICP get, where frame-to-frame
 // registration is more than 1 % long.
+#include "range_image_mapping/io/kitti.h"
+#include "range_image_mapping/io/recording.h"
 #include "range_image_mapping/registration/lidar_odometry.h"
 #include "range_image_mapping/registration/local_model.h"
-#include "range_image_mapping/io/recording.h"
+#include "range_image_mapping/sensor_catalog.h"
 
 #include "test_data.h"
 
@@ -105,16 +107,19 @@ TEST(LocalModel, KeepsTheNearestSurfaceAndOnItTheNewestKeyframe) {
 TEST(LocalModel, DropsTheOldestKeyframeAndReplacesAProvisionalOne) {
   const std::vector<int> strides{1};
   LocalModel model(LocalModelOptions{2, 1.0, 0.0});
+  // Rows 0.25 deg apart: the option's distance is the one in use.
+  const LidarModel dense(LidarIntrinsics::synthetic(128, 256, 16.0 * kDegree, -16.0 * kDegree));
+  ASSERT_DOUBLE_EQ(keyframeDistance(model.options(), dense), 1.0);
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-  EXPECT_TRUE(model.wantsKeyframe(pose));
+  EXPECT_TRUE(model.wantsKeyframe(pose, dense));
   model.add(pyramid(cylinderScan(5.0f), strides), pose, true);
   EXPECT_TRUE(model.provisional());
-  EXPECT_TRUE(model.wantsKeyframe(pose));  // a provisional keyframe is always replaced
+  EXPECT_TRUE(model.wantsKeyframe(pose, dense));  // a provisional keyframe is always replaced
   model.add(pyramid(cylinderScan(6.0f), strides), pose, false);
   EXPECT_EQ(model.size(), 1u);
-  EXPECT_FALSE(model.wantsKeyframe(pose));
+  EXPECT_FALSE(model.wantsKeyframe(pose, dense));
   pose.translation().x() = 1.0;
-  EXPECT_TRUE(model.wantsKeyframe(pose));
+  EXPECT_TRUE(model.wantsKeyframe(pose, dense));
   model.add(pyramid(cylinderScan(7.0f), strides), pose, false);
   pose.translation().x() = 2.0;
   model.add(pyramid(cylinderScan(8.0f), strides), pose, false);
@@ -122,6 +127,35 @@ TEST(LocalModel, DropsTheOldestKeyframeAndReplacesAProvisionalOne) {
   EXPECT_TRUE(model.newestPose().isApprox(pose));
   EXPECT_THROW(LocalModel(LocalModelOptions{0, 1.0, 0.0}), std::invalid_argument);
   EXPECT_THROW(LocalModel(LocalModelOptions{2, -1.0, 0.0}), std::invalid_argument);
+}
+
+// On a sensor with rows a degree or more apart the keyframes are a metre per
+// degree of its median beam spacing apart at least (a VLP-16's 2 deg: 2 m;
+// an HDL-32E's 1.33 deg: 1.33 m); denser sensors keep the option's distance,
+// and 0 (every scan a keyframe) stays 0.
+TEST(LocalModel, KeyframeDistanceFollowsTheSensorsRowSpacing) {
+  const LocalModelOptions options;  // 0.5 m
+  const auto distanceFor = [&](const std::string& name) {
+    const std::optional<LidarIntrinsics> intrinsics = catalogSensor(name);
+    EXPECT_TRUE(intrinsics) << name;
+    return intrinsics ? keyframeDistance(options, LidarModel(*intrinsics)) : -1.0;
+  };
+  EXPECT_NEAR(distanceFor("VLP-16"), 2.0, 0.01);
+  EXPECT_NEAR(distanceFor("HDL-32E"), 1.33, 0.01);
+  EXPECT_DOUBLE_EQ(distanceFor("VLP-32C"), 0.5);
+  EXPECT_DOUBLE_EQ(distanceFor("Pandar64"), 0.5);
+  EXPECT_DOUBLE_EQ(keyframeDistance(options, LidarModel(io::kittiHdl64Intrinsics())), 0.5);
+  const LidarModel vlp16(*catalogSensor("VLP-16"));
+  EXPECT_DOUBLE_EQ(keyframeDistance(LocalModelOptions{4, 0.0, 0.0}, vlp16), 0.0);
+  EXPECT_DOUBLE_EQ(keyframeDistance(LocalModelOptions{4, 3.0, 0.0}, vlp16), 3.0);
+  // The model asks for a keyframe at the sensor's distance, not the option's.
+  LocalModel model(options);
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  model.add(pyramid(cylinderScan(5.0f), {1}), pose, false);
+  pose.translation().x() = 1.0;
+  EXPECT_FALSE(model.wantsKeyframe(pose, vlp16));
+  pose.translation().x() = 2.1;
+  EXPECT_TRUE(model.wantsKeyframe(pose, vlp16));
 }
 
 // A sparse sensor (8 rows 4 deg apart) over a flat floor 1.5 m below it:

@@ -70,6 +70,9 @@ struct LidarIntrinsics {
 
   bool columnInWindow(int column) const;
   int columnWindowWidth() const;
+  // The median angle between neighbouring rows' altitudes (0 with one row):
+  // how sparse the sensor's rows are.
+  double medianRowSpacingRad() const;
 };
 
 // A pixel hit by the projection Pi, with the range from the beam origin as the

@@ -326,7 +326,7 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
   if (update.suspect) update.covariance *= kSuspectCovarianceScale;
   // A step that fell back to the prior has an uncertain pose: the model waits
   // for a registered one, unless it has nothing deskewed yet.
-  if ((!update.degenerate || model_.provisional()) && model_.wantsKeyframe(pose_)) addKeyframe(scan, deskewed);
+  if ((!update.degenerate || model_.provisional()) && model_.wantsKeyframe(pose_, *scan.model)) addKeyframe(scan, deskewed);
   return finish();
 }
 

@@ -232,12 +232,7 @@ constexpr double kAreaWeightSpacing_m_rad2 = 0.0045;
 double areaWeightRange(const RegistrationOptions& options, const LidarModel& model) {
   const double max_range_m = options.area_weight_max_range_m;
   if (!(max_range_m > 0.0)) return 0.0;
-  std::vector<double> spacing;
-  const std::vector<double>& altitude = model.intrinsics().altitude_rad;
-  for (std::size_t row = 1; row < altitude.size(); ++row) spacing.push_back(std::abs(altitude[row - 1] - altitude[row]));
-  if (spacing.empty()) return max_range_m;
-  std::nth_element(spacing.begin(), spacing.begin() + spacing.size() / 2, spacing.end());
-  const double d = spacing[spacing.size() / 2];
+  const double d = model.intrinsics().medianRowSpacingRad();
   return d > 0.0 ? std::min(max_range_m, kAreaWeightSpacing_m_rad2 / (d * d)) : max_range_m;
 }
 

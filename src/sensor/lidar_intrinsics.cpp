@@ -114,6 +114,15 @@ int LidarIntrinsics::columnWindowWidth() const {
   return first <= last ? last - first + 1 : columns - first + last + 1;
 }
 
+double LidarIntrinsics::medianRowSpacingRad() const {
+  std::vector<double> spacing;
+  for (std::size_t row = 1; row < altitude_rad.size(); ++row)
+    spacing.push_back(std::abs(altitude_rad[row - 1] - altitude_rad[row]));
+  if (spacing.empty()) return 0.0;
+  std::nth_element(spacing.begin(), spacing.begin() + spacing.size() / 2, spacing.end());
+  return spacing[spacing.size() / 2];
+}
+
 LidarModel::LidarModel(LidarIntrinsics intrinsics) : intrinsics_(std::move(intrinsics)) {
   intrinsics_.validate();
   const int rows = intrinsics_.rows;

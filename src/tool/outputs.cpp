@@ -61,6 +61,7 @@ Json::Value OdometryCommandLine::json(const LidarModel* sensor) const {
   json["area_weight_max_range_m"] = area_weight_max_range_m;
   if (sensor) json["area_weight_range_in_use_m"] = registration::areaWeightRange(options().registration, *sensor);
   json["keyframe_distance_m"] = keyframe_distance_m;
+  if (sensor) json["keyframe_distance_in_use_m"] = registration::keyframeDistance(options().model, *sensor);
   json["keyframe_angle_deg"] = keyframe_angle_deg;
   json["model_normal_radius_m"] = model_normal_radius_m;
   return json;

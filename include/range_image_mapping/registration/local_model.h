@@ -38,6 +38,11 @@ struct LocalModelOptions {
   double normal_radius_m = 1.0;
 };
 
+// The keyframe distance with a sensor: options.keyframe_distance_m, raised on
+// a sensor with rows a degree or more apart to a metre per degree of its
+// median beam spacing (VLP-16 2 m, HDL-32E 1.33 m; 0 stays 0: every scan).
+double keyframeDistance(const LocalModelOptions& options, const LidarModel& model);
+
 class LocalModel {
  public:
   explicit LocalModel(LocalModelOptions options = {});
@@ -47,9 +52,10 @@ class LocalModel {
   std::size_t size() const { return keyframes_.size(); }
   // Pose of the newest keyframe (odometry frame); identity when empty.
   Eigen::Isometry3d newestPose() const;
-  // Whether a scan at odom_from_lidar is far enough from the newest keyframe
-  // to become one (always when empty, or when the newest is provisional).
-  bool wantsKeyframe(const Eigen::Isometry3d& odom_from_lidar) const;
+  // Whether a scan at odom_from_lidar, seen by model, is far enough from the
+  // newest keyframe to become one (always when empty, or when the newest is
+  // provisional); the distance is keyframeDistance(options, model).
+  bool wantsKeyframe(const Eigen::Isometry3d& odom_from_lidar, const LidarModel& model) const;
   // Adds a scan at odom_from_lidar: one map per pyramid level (points and
   // normals in its lidar frame at its scan time, NaN where invalid; each
   // level's normals computed at its own stride, as the registration's target
