@@ -48,7 +48,8 @@ struct OdometryCommandLine {
   double keyframe_angle_deg = registration::LocalModelOptions().keyframe_angle_rad * 180.0 / M_PI;
   double model_normal_radius_m = registration::LocalModelOptions().normal_radius_m;
   registration::OdometryOptions options() const;
-  // With the recording's sensor, also the area weight's cap in use with it.
+  // With the recording's sensor, also the values in force with it (the
+  // area weight's cap, the keyframe distance), which sparse rows change.
   Json::Value json(const LidarModel* sensor = nullptr) const;
 };
 void addOdometryOptions(Command& command, OdometryCommandLine& odometry);

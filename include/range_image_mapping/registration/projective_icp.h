@@ -63,6 +63,10 @@ struct RegistrationOptions {
   }
 };
 
+// The area weight's cap with a sensor: options.area_weight_max_range_m,
+// lowered on a sensor with sparse rows (its median beam spacing).
+double areaWeightRange(const RegistrationOptions& options, const LidarModel& model);
+
 struct RegistrationResult {
   Eigen::Isometry3d target_from_source = Eigen::Isometry3d::Identity();
   // J^T W J of the last iteration, unknowns [rotation, translation] (a left
@@ -86,10 +90,6 @@ struct LevelSchedule {
 // The target's vertex/normal maps are built once per target and reused.
 // align() reuses internal buffers: one instance must not align from several
 // threads at once (each call is parallel inside, with TBB).
-// The area weight's cap with a sensor: options.area_weight_max_range_m,
-// lowered on a sensor with sparse rows (its median beam spacing).
-double areaWeightRange(const RegistrationOptions& options, const LidarModel& model);
-
 class ProjectiveIcp {
  public:
   // Throws std::invalid_argument for inconsistent options (strides and
