@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <tuple>
 
 namespace range_image_mapping {
 namespace {
@@ -121,6 +122,17 @@ double ParameterReader::getDouble(const std::string& name, double default_value,
   return result;
 }
 
+std::pair<double, double> ParameterReader::getOrderedDoubles(const std::string& lower_name, double lower_default,
+                                                             const std::string& upper_name, double upper_default,
+                                                             double minimum, double maximum) const {
+  const double lower = getDouble(lower_name, lower_default, minimum, maximum);
+  const double upper = getDouble(upper_name, upper_default, minimum, maximum);
+  if (!(upper > lower))
+    throw ParameterError("parameter " + fullName(upper_name) + " (" + toText(upper) + ") must be above " +
+                         fullName(lower_name) + " (" + toText(lower) + ")");
+  return {lower, upper};
+}
+
 std::vector<int> ParameterReader::getIntList(const std::string& name, const std::vector<int>& default_value,
                                              int minimum, int maximum) const {
   XmlRpc::XmlRpcValue value;
@@ -190,13 +202,8 @@ AdapterParameters readAdapterParameters(const ros::NodeHandle& private_node) {
   parameters.estimate_clouds = reader.getInt("estimate_clouds", defaults.estimate_clouds, 1, 100);
   parameters.rows = reader.getInt("rows", defaults.rows, 1, 4096);
   parameters.columns = reader.getInt("columns", defaults.columns, 1, 1 << 16);
-  parameters.fov_up_deg = reader.getDouble("fov_up_deg", defaults.fov_up_deg, -90.0, 90.0);
-  parameters.fov_down_deg = reader.getDouble("fov_down_deg", defaults.fov_down_deg, -90.0, 90.0);
-  if (!(parameters.fov_up_deg > parameters.fov_down_deg))
-    throw ParameterError("parameter " + private_node.resolveName("fov_up_deg") + " (" +
-                         toText(parameters.fov_up_deg) + ") must be above " +
-                         private_node.resolveName("fov_down_deg") + " (" +
-                         toText(parameters.fov_down_deg) + ")");
+  std::tie(parameters.fov_down_deg, parameters.fov_up_deg) = reader.getOrderedDoubles(
+      "fov_down_deg", defaults.fov_down_deg, "fov_up_deg", defaults.fov_up_deg, -90.0, 90.0);
   if (parameters.input == AdapterInput::kPointCloud &&
       parameters.cloud_intrinsics == CloudIntrinsicsSource::kOuster && parameters.metadata_file.empty())
     throw ParameterError("parameter " + private_node.resolveName("metadata_file") +
@@ -383,13 +390,8 @@ MapperParameters readMapperParameters(const ros::NodeHandle& private_node) {
   parameters.queue_size = reader.getInt("queue_size", defaults.queue_size, 1, 1000);
 
   parameters.mesh_rate_hz = reader.getDouble("mesh_rate", defaults.mesh_rate_hz, 0.01, 100.0);
-  parameters.height_color_min_m = reader.getDouble("height_color_min", defaults.height_color_min_m, -1e4, 1e4);
-  parameters.height_color_max_m = reader.getDouble("height_color_max", defaults.height_color_max_m, -1e4, 1e4);
-  if (!(parameters.height_color_max_m > parameters.height_color_min_m))
-    throw ParameterError("parameter " + private_node.resolveName("height_color_max") + " (" +
-                         toText(parameters.height_color_max_m) + ") must be above " +
-                         private_node.resolveName("height_color_min") + " (" +
-                         toText(parameters.height_color_min_m) + ")");
+  std::tie(parameters.height_color_min_m, parameters.height_color_max_m) = reader.getOrderedDoubles(
+      "height_color_min", defaults.height_color_min_m, "height_color_max", defaults.height_color_max_m, -1e4, 1e4);
   parameters.intensity_color_max =
       reader.getDouble("intensity_color_max", defaults.intensity_color_max, 1e-6, 1e9);
   parameters.marker_chunk_blocks = reader.getInt("marker_chunk_blocks", defaults.marker_chunk_blocks, 1, 64);

@@ -14,6 +14,7 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace range_image_mapping {
@@ -49,6 +50,10 @@ class ParameterReader {
   // Accepts integers too (YAML "10" for 10.0).
   double getDouble(const std::string& name, double default_value, double minimum,
                    double maximum) const;
+  // Two numbers within [minimum, maximum] that must be ordered: upper above lower.
+  std::pair<double, double> getOrderedDoubles(const std::string& lower_name, double lower_default,
+                                              const std::string& upper_name, double upper_default,
+                                              double minimum, double maximum) const;
   // A list of integers, each within [minimum, maximum].
   std::vector<int> getIntList(const std::string& name, const std::vector<int>& default_value,
                               int minimum, int maximum) const;
