@@ -36,7 +36,7 @@
 #include "range_image_mapping/io/recording.h"
 #include "range_image_mapping/pipeline/scan_to_map_pipeline.h"
 #include "range_image_mapping/registration/lidar_odometry.h"
-#include "list_argument.h"
+#include "command_line.h"
 #include "machine_info.h"
 #include "test_data.h"
 
@@ -570,26 +570,22 @@ void printChecks(const std::vector<Comparison>& comparisons) {
 
 int run(int argc, char** argv) {
   Options options;
-  for (int i = 1; i < argc; ++i) {
-    const std::string argument = argv[i];
-    const auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::invalid_argument(argument + " needs a value");
-      return argv[++i];
-    };
+  for (benchmark_support::ArgumentCursor arguments(argc, argv); arguments.next();) {
+    const std::string argument = arguments.name();
     if (argument == "--frames") {
-      options.frames = std::stoi(value());
+      options.frames = arguments.integer();
       if (options.frames < 0 || options.frames == 1) throw std::invalid_argument("--frames: 0 (all) or at least 2");
     } else if (argument == "--datasets") {
-      options.datasets = splitList(value());
+      options.datasets = splitList(arguments.value());
     } else if (argument == "--threads") {
-      options.threads = std::stoi(value());
+      options.threads = arguments.integer();
       if (options.threads < 1) throw std::invalid_argument("--threads: at least 1");
     } else if (argument == "--work") {
-      options.work = value();
+      options.work = arguments.value();
     } else if (argument == "--poses") {
-      options.poses = value();
+      options.poses = arguments.value();
     } else if (argument == "--kiss-indoor-range") {
-      options.kiss_indoor_range_m = std::stod(value());
+      options.kiss_indoor_range_m = arguments.number();
       if (!(options.kiss_indoor_range_m > 0)) throw std::invalid_argument("--kiss-indoor-range: positive");
     } else if (argument == "--reuse") {
       options.reuse = true;

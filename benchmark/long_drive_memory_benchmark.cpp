@@ -19,6 +19,7 @@
 //          [--columns 512|1024|2048] [--memory-radius 40] [--keep-dropped-mesh]
 //          [--mesh-every 10] [--sample-every 1000] [--scene-extent 1000]
 //          [--threads 2] [--csv FILE]
+#include "command_line.h"
 #include "machine_info.h"
 #include "simulated_mapping_sequence.h"
 
@@ -85,22 +86,18 @@ void printUsage() {
 
 Options parseOptions(int argc, char** argv) {
   Options options;
-  for (int i = 1; i < argc; ++i) {
-    const std::string name = argv[i];
-    const auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::invalid_argument(name + " needs a value");
-      return argv[++i];
-    };
-    if (name == "--frames") options.frames = std::stoi(value());
-    else if (name == "--beams") options.beams = std::stoi(value());
-    else if (name == "--columns") options.columns = std::stoi(value());
-    else if (name == "--memory-radius") options.memory_radius_m = std::stod(value());
+  for (benchmark_support::ArgumentCursor arguments(argc, argv); arguments.next();) {
+    const std::string name = arguments.name();
+    if (name == "--frames") options.frames = arguments.integer();
+    else if (name == "--beams") options.beams = arguments.integer();
+    else if (name == "--columns") options.columns = arguments.integer();
+    else if (name == "--memory-radius") options.memory_radius_m = arguments.number();
     else if (name == "--keep-dropped-mesh") options.keep_dropped_mesh = true;
-    else if (name == "--mesh-every") options.mesh_every = std::stoi(value());
-    else if (name == "--sample-every") options.sample_every = std::stoi(value());
-    else if (name == "--scene-extent") options.scene_extent_m = std::stod(value());
-    else if (name == "--threads") options.threads = std::stoi(value());
-    else if (name == "--csv") options.csv = value();
+    else if (name == "--mesh-every") options.mesh_every = arguments.integer();
+    else if (name == "--sample-every") options.sample_every = arguments.integer();
+    else if (name == "--scene-extent") options.scene_extent_m = arguments.number();
+    else if (name == "--threads") options.threads = arguments.integer();
+    else if (name == "--csv") options.csv = arguments.value();
     else if (name == "--help" || name == "-h") {
       printUsage();
       std::exit(0);

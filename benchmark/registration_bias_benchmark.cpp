@@ -15,6 +15,7 @@
 //
 // Usage: registration_bias_benchmark [--frames N] [--max-range-jump-ratio R]
 //          [--kernel-scale M] DIR [DIR...]
+#include "command_line.h"
 #include "machine_info.h"
 #include "range_image_mapping/io/pose_file.h"
 #include "range_image_mapping/io/recording.h"
@@ -104,18 +105,14 @@ void measure(const std::string& directory, const Options& options) {
 
 int run(int argc, char** argv) {
   Options options;
-  for (int k = 1; k < argc; ++k) {
-    const std::string argument = argv[k];
-    const auto value = [&]() -> std::string {
-      if (k + 1 >= argc) throw std::invalid_argument(argument + " needs a value");
-      return argv[++k];
-    };
+  for (benchmark_support::ArgumentCursor arguments(argc, argv); arguments.next();) {
+    const std::string argument = arguments.name();
     if (argument == "--frames")
-      options.frames = std::stoi(value());
+      options.frames = arguments.integer();
     else if (argument == "--max-range-jump-ratio")
-      options.registration.normals.max_range_jump_ratio = std::stof(value());
+      options.registration.normals.max_range_jump_ratio = float(arguments.number());
     else if (argument == "--kernel-scale")
-      options.registration.kernel.scale_m = std::stod(value());
+      options.registration.kernel.scale_m = arguments.number();
     else if (!argument.empty() && argument[0] == '-')
       throw std::invalid_argument("unknown option " + argument);
     else

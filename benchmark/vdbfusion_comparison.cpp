@@ -27,7 +27,7 @@
 //
 // Usage: vdbfusion_comparison_benchmark [--frames 300] [--sequences outdoor_car,kitti_like]
 //          [--threads 2] [--no-peer]
-#include "list_argument.h"
+#include "command_line.h"
 #include "machine_info.h"
 #include "simulated_mapping_sequence.h"
 #include "timing.h"
@@ -196,19 +196,15 @@ test::MappingPreset presetNamed(const std::string& name) {
 
 int run(int argc, char** argv) {
   Options options;
-  for (int i = 1; i < argc; ++i) {
-    const std::string argument = argv[i];
-    const auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::invalid_argument(argument + " needs a value");
-      return argv[++i];
-    };
+  for (benchmark_support::ArgumentCursor arguments(argc, argv); arguments.next();) {
+    const std::string argument = arguments.name();
     if (argument == "--frames") {
-      options.frames = std::stoi(value());
+      options.frames = arguments.integer();
       if (options.frames < 1) throw std::invalid_argument("--frames: at least 1");
     } else if (argument == "--sequences") {
-      options.sequences = splitList(value());
+      options.sequences = splitList(arguments.value());
     } else if (argument == "--threads") {
-      options.threads = std::stoi(value());
+      options.threads = arguments.integer();
       if (options.threads < 1) throw std::invalid_argument("--threads: at least 1");
     } else if (argument == "--no-peer") {
       options.peer = false;
