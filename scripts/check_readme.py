@@ -40,6 +40,9 @@ def parameters_in_code(parameters_cpp, nodelet):
         seen.add(function)
         body = bodies[function]
         names.update(re.findall(r'reader\.get\w+\(\s*"([^"]+)"', body))
+        # getOrderedDoubles reads two parameters: the lower's name first, the upper's third.
+        for lower, upper in re.findall(r'reader\.getOrderedDoubles\(\s*"([^"]+)",[^,]+,\s*"([^"]+)"', body):
+            names.update((lower, upper))
         pending.extend(name for name in re.findall(r"\b(read\w+)\(", body) if name in bodies)
     return names
 
