@@ -25,6 +25,10 @@ struct SimulatedSensor {
   // as skipped with its figures, so the miss stays visible; it fails once the
   // sensor meets them, to have this note removed.
   const char* known_miss = "";
+  // 0: the preset's own drive (rim run PRESET). Otherwise another drive of
+  // the preset (scene, motion and noise from this seed), simulated first,
+  // so that the targets are checked on more than one route.
+  unsigned seed = 0;
 };
 
 class SimulatedSensors : public test::RimCommandTest, public ::testing::WithParamInterface<SimulatedSensor> {};
@@ -35,8 +39,18 @@ constexpr int kFrames = 200;
 TEST_P(SimulatedSensors, OutdoorDriveMeetsTheOusterPresetsTargetsWithAnEstimatedModel) {
   const SimulatedSensor& sensor = GetParam();
   const std::string out = path("run");
+  std::string input = sensor.preset;
+  if (sensor.seed) {
+    // As rim run simulates a preset: the ground-truth surface clipped at the
+    // outdoor map's 30 m range.
+    input = path("sequence");
+    const test::RunResult simulated = rim(std::string("simulate --preset ") + sensor.preset + " --seed " +
+                                          std::to_string(sensor.seed) + " --frames " + std::to_string(kFrames) +
+                                          " --surface-max-range 30 --out " + input);
+    ASSERT_EQ(simulated.exit_code, 0) << simulated.err;
+  }
   const test::RunResult run =
-      rim(std::string("run ") + sensor.preset + " --frames " + std::to_string(kFrames) + " --no-plot --out " + out);
+      rim("run " + input + " --frames " + std::to_string(kFrames) + " --no-plot --out " + out);
   ASSERT_EQ(run.exit_code, 0) << run.err;
   std::cout << sensor.sensor << ":\n" << run.out;
   // Read as plain clouds: the model is estimated, not the catalog's.
@@ -51,7 +65,8 @@ TEST_P(SimulatedSensors, OutdoorDriveMeetsTheOusterPresetsTargetsWithAnEstimated
   const double rpe_deg = truth["rpe_rotation_deg_per_100m"].asDouble();
   const double f_score = truth["surface"]["f_score"].asDouble();
   std::ostringstream figures;
-  figures << sensor.sensor << ": RPE " << rpe_percent << " %, " << rpe_deg << " deg/100 m, mesh F " << f_score;
+  figures << sensor.sensor << (sensor.seed ? " (seed " + std::to_string(sensor.seed) + ")" : std::string())
+          << ": RPE " << rpe_percent << " %, " << rpe_deg << " deg/100 m, mesh F " << f_score;
   std::cout << figures.str() << "\n";
   const bool meets = rpe_percent <= 0.8 && rpe_deg <= 0.3 && f_score >= 0.95;
   if (*sensor.known_miss) {
@@ -68,9 +83,14 @@ INSTANTIATE_TEST_SUITE_P(Catalog, SimulatedSensors,
                          ::testing::Values(SimulatedSensor{"outdoor_vlp16", "VLP-16"},
                                            SimulatedSensor{"outdoor_vlp32c", "VLP-32C"},
                                            SimulatedSensor{"outdoor_hdl32", "HDL-32E"},
-                                           SimulatedSensor{"outdoor_pandar64", "Pandar64"}),
+                                           SimulatedSensor{"outdoor_pandar64", "Pandar64"},
+                                           SimulatedSensor{"outdoor_vlp16", "VLP-16",
+                                                           "on this drive the roll and pitch err by 0.2-0.5 deg "
+                                                           "(yaw 0.02 deg/100 m): see the README, issue 14",
+                                                           7}),
                          [](const ::testing::TestParamInfo<SimulatedSensor>& info) {
-                           return std::string(info.param.preset);
+                           return std::string(info.param.preset) +
+                                  (info.param.seed ? "_seed" + std::to_string(info.param.seed) : std::string());
                          });
 
 }  // namespace
