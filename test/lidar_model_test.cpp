@@ -168,15 +168,29 @@ TEST(LidarModel, ProjectManyAgreesWithProjectPointByPoint) {
     std::vector<ProjectedPixel> pixels(points.size());
     std::vector<uint8_t> hits(points.size());
     model.projectMany(points.data(), points.size(), pixels.data(), hits.data());
+    // The same points as coordinate arrays give the same pixels to the bit.
+    std::vector<float> x, y, z;
+    for (const Eigen::Vector3f& point : points) {
+      x.push_back(point.x());
+      y.push_back(point.y());
+      z.push_back(point.z());
+    }
+    std::vector<ProjectedPixel> array_pixels(points.size());
+    std::vector<uint8_t> array_hits(points.size());
+    model.projectMany(x.data(), y.data(), z.data(), points.size(), array_pixels.data(), array_hits.data());
     std::size_t hit_count = 0;
     for (std::size_t i = 0; i < points.size(); ++i) {
       const auto expected = model.project(points[i]);
       ASSERT_EQ(bool(hits[i]), expected.has_value()) << "point " << i;
+      ASSERT_EQ(array_hits[i], hits[i]) << "point " << i;
       if (!expected) continue;
       ++hit_count;
       EXPECT_EQ(pixels[i].row, expected->row) << "point " << i;
       EXPECT_EQ(pixels[i].column, expected->column) << "point " << i;
       EXPECT_FLOAT_EQ(pixels[i].range, expected->range) << "point " << i;
+      EXPECT_EQ(array_pixels[i].row, pixels[i].row) << "point " << i;
+      EXPECT_EQ(array_pixels[i].column, pixels[i].column) << "point " << i;
+      EXPECT_EQ(array_pixels[i].range, pixels[i].range) << "point " << i;
     }
     EXPECT_GT(hit_count, 1000u);
   }

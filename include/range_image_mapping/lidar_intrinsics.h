@@ -114,6 +114,10 @@ class LidarModel {
   // times faster than calling project() per point.
   void projectMany(const Eigen::Vector3f* points, std::size_t count, ProjectedPixel* pixels,
                    uint8_t* hits) const;
+  // The same for points given as separate x, y, z arrays (callers that
+  // compute their points in vectorised passes), the same pixels.
+  void projectMany(const float* x, const float* y, const float* z, std::size_t count, ProjectedPixel* pixels,
+                   uint8_t* hits) const;
   // Pi with the row already known (a cloud's ring field): only the column
   // and range are solved for.
   std::optional<ProjectedPixel> projectOnRow(const Eigen::Vector3f& point_lidar, int row) const;

@@ -72,9 +72,9 @@ struct ActivationCells {
   int cells_per_edge = 1;  // 1, 2 or 4
   int shift = 0;           // log2(cells_per_edge): cell -> block by arithmetic shift
   // Per voxel of a block: the cells whose activation selects it, and its
-  // lattice coordinates (i, j, k) as floats.
+  // lattice coordinates i, j, k as floats.
   std::vector<CellMask> selecting_cells;
-  std::vector<Eigen::Vector3f> lattice;
+  std::vector<float> lattice_i, lattice_j, lattice_k;
   // Per row of voxels along the block's x axis (index j + edge * k): the
   // cells that select any voxel of the row, so that a row no activated cell
   // selects is passed over whole.
@@ -88,7 +88,9 @@ struct ActivationCells {
     cell_voxels = edge / cells_per_edge;
     shift = cells_per_edge == 4 ? 2 : (cells_per_edge == 2 ? 1 : 0);
     selecting_cells.assign(std::size_t(edge) * edge * edge, 0);
-    lattice.resize(selecting_cells.size());
+    lattice_i.resize(selecting_cells.size());
+    lattice_j.resize(selecting_cells.size());
+    lattice_k.resize(selecting_cells.size());
     row_selecting_cells.assign(std::size_t(edge) * edge, 0);
     // The cells of one axis coordinate: its own, and the one below for the
     // first layer of a cell.
@@ -109,7 +111,9 @@ struct ActivationCells {
             for (int b = 0; b < 3; ++b)
               for (int c = 0; c < 3; ++c)
                 selecting_cells[v] |= CellMask(1) << (ci[a] + cells_per_edge * (cj[b] + cells_per_edge * ck[c]));
-          lattice[v] = Eigen::Vector3f(float(i), float(j), float(k));
+          lattice_i[v] = float(i);
+          lattice_j[v] = float(j);
+          lattice_k[v] = float(k);
           row_selecting_cells[v / edge] |= selecting_cells[v];
         }
   }
@@ -221,11 +225,58 @@ struct BlockWriter {
   }
 };
 
+// Points as separate coordinate arrays: the transforms of a block's voxels
+// vectorise, and projectMany takes them so.
+struct PointArrays {
+  std::vector<float> x, y, z;
+  void resize(std::size_t n) {
+    x.resize(n);
+    y.resize(n);
+    z.resize(n);
+  }
+};
+
+// Raw pointers to the coordinates (the compiler cannot prove the vectors'
+// members unchanged by stores through others and would reload them).
+struct PointPointers {
+  float* x;
+  float* y;
+  float* z;
+  explicit PointPointers(PointArrays& arrays) : x(arrays.x.data()), y(arrays.y.data()), z(arrays.z.data()) {}
+  Eigen::Vector3f operator[](std::size_t i) const { return {x[i], y[i], z[i]}; }
+  void set(std::size_t i, const Eigen::Vector3f& point) const {
+    x[i] = point.x();
+    y[i] = point.y();
+    z[i] = point.z();
+  }
+};
+
+// to = offset + linear * (i, j, k) for each of count lattice coordinates,
+// rounded as Eigen's `offset + linear * v` (its 3-term sums associate to the
+// right), so that the voxel positions are those of the Eigen expression.
+RANGE_IMAGE_MAPPING_AVX2_CLONES
+void transformLattice(const Eigen::Vector3f& offset, const Eigen::Matrix3f& linear, const float* __restrict i_all,
+                      const float* __restrict j_all, const float* __restrict k_all, std::size_t count,
+                      float* __restrict x, float* __restrict y, float* __restrict z) {
+  const float m00 = linear(0, 0), m01 = linear(0, 1), m02 = linear(0, 2);
+  const float m10 = linear(1, 0), m11 = linear(1, 1), m12 = linear(1, 2);
+  const float m20 = linear(2, 0), m21 = linear(2, 1), m22 = linear(2, 2);
+  const float ox = offset.x(), oy = offset.y(), oz = offset.z();
+  for (std::size_t n = 0; n < count; ++n) {  // vectorised
+    const float i = i_all[n], j = j_all[n], k = k_all[n];
+    x[n] = ox + (m00 * i + (m01 * j + m02 * k));
+    y[n] = oy + (m10 * i + (m11 * j + m12 * k));
+    z[n] = oz + (m20 * i + (m21 * j + m22 * k));
+  }
+}
+
 // Voxel positions and their projections for one block, reused per thread.
 struct BlockBuffers {
-  // points: lidar frame at the scan time; frame_points: each voxel in the
-  // frame its pixel was measured in (the column's, for a moving sensor).
-  std::vector<Eigen::Vector3f> points, moved_points, frame_points;
+  // points: lidar frame at the scan time; moved: each voxel in the frame its
+  // pixel was measured in (the column's, for a moving sensor); scratch:
+  // points projected in passes over a few voxels (motion refinement, feet
+  // on planes).
+  PointArrays points, moved, scratch;
   std::vector<ProjectedPixel> pixels;
   std::vector<uint8_t> hits;
   // Motion refinement: the column whose motion placed each voxel, and the
@@ -237,14 +288,14 @@ struct BlockBuffers {
   // The block's selected voxels (those of its activated cells), in order:
   // index in the block and lattice coordinates (i, j, k).
   std::vector<uint32_t> voxel_index;
-  std::vector<Eigen::Vector3f> lattice;
+  PointArrays lattice;
   void resize(std::size_t voxels) {
-    if (points.size() == voxels) return;
+    if (voxel_index.size() == voxels) return;
     voxel_index.resize(voxels);
     lattice.resize(voxels);
     points.resize(voxels);
-    moved_points.resize(voxels);
-    frame_points.resize(voxels);
+    moved.resize(voxels);
+    scratch.resize(voxels);
     pixels.resize(voxels);
     hits.resize(voxels);
     motion_columns.resize(voxels);
@@ -396,51 +447,61 @@ std::vector<int> rowsByAltitude(const LidarIntrinsics& intrinsics) {
 // settle lie where the sweep's start and end overlap or leave a gap (the
 // seam): they miss this scan rather than being averaged with the wrong
 // sensor position.
-// Works on the block's selected voxels (buffers.lattice, count of them).
+// Works on the block's selected voxels (buffers.lattice and buffers.points,
+// count of them); leaves each voxel hit in the frame of its column in
+// buffers.moved.
 void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion, const Eigen::Vector3f& first,
                              const Eigen::Matrix3f& lattice_steps, int edge, std::size_t count,
                              BlockBuffers& buffers) {
   const Eigen::Vector3f block_centre = first + lattice_steps * Eigen::Vector3f::Constant(0.5f * float(edge - 1));
   const int centre_column = columnSeenFromMovingSensor(model, motion, block_centre);
+  const PointPointers points(buffers.points), moved(buffers.moved), scratch(buffers.scratch);
+  ProjectedPixel* pixels = buffers.pixels.data();
+  uint8_t* hits = buffers.hits.data();
+  uint32_t* pending_voxels = buffers.pending.data();
+  int* motion_columns = buffers.motion_columns.data();
   std::size_t pending = 0;
   if (centre_column >= 0) {
     // The block's lattice in the centre column's frame.
     const Eigen::Vector3f moved_first = motion.toColumnFrame(centre_column, first);
     const Eigen::Matrix3f moved_steps = motion.inverse[centre_column].leftCols<3>() * lattice_steps;
-    for (std::size_t i = 0; i < count; ++i) buffers.moved_points[i] = moved_first + moved_steps * buffers.lattice[i];
-    model.projectMany(buffers.moved_points.data(), count, buffers.pixels.data(), buffers.hits.data());
+    transformLattice(moved_first, moved_steps, buffers.lattice.x.data(), buffers.lattice.y.data(),
+                     buffers.lattice.z.data(), count, moved.x, moved.y, moved.z);
+    model.projectMany(moved.x, moved.y, moved.z, count, pixels, hits);
     for (std::size_t i = 0; i < count; ++i) {
       // A miss here is a voxel off the vertical field of view by more than
       // the sensor moved between the two columns: it is left out.
-      if (!buffers.hits[i]) continue;
-      buffers.frame_points[i] = buffers.moved_points[i];
-      if (!motion.settled(centre_column, buffers.pixels[i].column)) buffers.pending[pending++] = uint32_t(i);
+      if (!hits[i]) continue;
+      if (!motion.settled(centre_column, pixels[i].column)) pending_voxels[pending++] = uint32_t(i);
     }
   } else {  // the centre is outside the field of view: start from the scan-time projection
-    model.projectMany(buffers.points.data(), count, buffers.pixels.data(), buffers.hits.data());
+    model.projectMany(points.x, points.y, points.z, count, pixels, hits);
     for (std::size_t i = 0; i < count; ++i)
-      if (buffers.hits[i]) buffers.pending[pending++] = uint32_t(i);
+      if (hits[i]) pending_voxels[pending++] = uint32_t(i);
   }
+  ProjectedPixel* pending_pixels = buffers.pending_pixels.data();
+  uint8_t* pending_hits = buffers.pending_hits.data();
   for (int pass = 0; pass < kMotionRefinements && pending > 0; ++pass) {
     for (std::size_t n = 0; n < pending; ++n) {
-      const uint32_t i = buffers.pending[n];
-      buffers.motion_columns[i] = buffers.pixels[i].column;
-      buffers.moved_points[n] = motion.toColumnFrame(buffers.motion_columns[i], buffers.points[i]);
+      const uint32_t i = pending_voxels[n];
+      motion_columns[i] = pixels[i].column;
+      scratch.set(n, motion.toColumnFrame(motion_columns[i], points[i]));
     }
-    model.projectMany(buffers.moved_points.data(), pending, buffers.pending_pixels.data(),
-                      buffers.pending_hits.data());
+    model.projectMany(scratch.x, scratch.y, scratch.z, pending, pending_pixels, pending_hits);
     std::size_t unsettled = 0;
     for (std::size_t n = 0; n < pending; ++n) {
-      const uint32_t i = buffers.pending[n];
-      buffers.hits[i] = buffers.pending_hits[n];
-      if (!buffers.hits[i]) continue;
-      buffers.pixels[i] = buffers.pending_pixels[n];
-      buffers.frame_points[i] = buffers.moved_points[n];
-      if (!motion.settled(buffers.motion_columns[i], buffers.pixels[i].column)) buffers.pending[unsettled++] = i;
+      const uint32_t i = pending_voxels[n];
+      hits[i] = pending_hits[n];
+      if (!hits[i]) continue;
+      pixels[i] = pending_pixels[n];
+      moved.x[i] = scratch.x[n];
+      moved.y[i] = scratch.y[n];
+      moved.z[i] = scratch.z[n];
+      if (!motion.settled(motion_columns[i], pixels[i].column)) pending_voxels[unsettled++] = i;
     }
     pending = unsettled;
   }
-  for (std::size_t n = 0; n < pending; ++n) buffers.hits[buffers.pending[n]] = 0;
+  for (std::size_t n = 0; n < pending; ++n) hits[pending_voxels[n]] = 0;
 }
 
 // Per row, the angle between neighbouring pixels: the larger of the column
@@ -793,30 +854,34 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
       // Only the voxels of the cells activated.
       const CellMask activated = work.touched_cells[b];
       const CellMask* selecting_cells = cells.selecting_cells.data();
-      const Eigen::Vector3f* voxel_lattice = cells.lattice.data();
+      const float *cell_i = cells.lattice_i.data(), *cell_j = cells.lattice_j.data(), *cell_k = cells.lattice_k.data();
+      const PointPointers lattice(buffers.lattice), points(buffers.points);
+      uint32_t* selected = buffers.voxel_index.data();
       const std::size_t voxel_rows = std::size_t(edge) * edge;
       std::size_t count = 0;
       for (std::size_t row = 0; row < voxel_rows; ++row) {
         if (!(cells.row_selecting_cells[row] & activated)) continue;
         for (std::size_t v = row * edge, row_end = v + edge; v < row_end; ++v) {
           if (!(selecting_cells[v] & activated)) continue;
-          buffers.voxel_index[count] = uint32_t(v);
-          buffers.lattice[count] = voxel_lattice[v];
-          buffers.points[count] = first + lattice_steps * voxel_lattice[v];
+          selected[count] = uint32_t(v);
+          lattice.x[count] = cell_i[v];
+          lattice.y[count] = cell_j[v];
+          lattice.z[count] = cell_k[v];
           ++count;
         }
       }
+      transformLattice(first, lattice_steps, lattice.x, lattice.y, lattice.z, count, points.x, points.y, points.z);
       if (moving) {
         projectIntoMovingSensor(model, sweep_motion, first, lattice_steps, edge, count, buffers);
       } else {
-        model.projectMany(buffers.points.data(), count, buffers.pixels.data(), buffers.hits.data());
+        model.projectMany(points.x, points.y, points.z, count, buffers.pixels.data(), buffers.hits.data());
       }
       // Raw pointers: the compiler cannot prove the vectors' members unchanged
       // by the stores below and would reload them for every voxel.
       const uint32_t* voxel_index = buffers.voxel_index.data();
       const uint8_t* hits = buffers.hits.data();
       const ProjectedPixel* pixels = buffers.pixels.data();
-      const Eigen::Vector3f* frame_points = moving ? buffers.frame_points.data() : buffers.points.data();
+      const PointPointers frame_points = moving ? PointPointers(buffers.moved) : points;
       float* sdf = block.sdf.data();
       float* weight = block.weight.data();
       float* intensity = with_intensity ? block.intensity.data() : nullptr;
@@ -838,7 +903,7 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
         // projected together (the projection buffers are free now).
         std::size_t unverified = 0;
         uint32_t* unverified_voxels = buffers.pending.data();
-        Eigen::Vector3f* feet = buffers.moved_points.data();
+        const PointPointers feet(buffers.scratch);
         for (std::size_t i = 0; i < count; ++i) {
           if (!hits[i]) continue;
           const std::size_t p = std::size_t(pixels[i].row) * columns + pixels[i].column;
@@ -857,13 +922,13 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
             write(voxel_index[i], p, to_plane);
           } else {
             unverified_voxels[unverified] = uint32_t(i);
-            feet[unverified++] = frame_points[i] - to_plane * plane.normal;
+            feet.set(unverified++, frame_points[i] - to_plane * plane.normal);
           }
         }
         if (unverified > 0) {
           ProjectedPixel* foot_pixels = buffers.pending_pixels.data();
           uint8_t* foot_hits = buffers.pending_hits.data();
-          model.projectMany(feet, unverified, foot_pixels, foot_hits);
+          model.projectMany(feet.x, feet.y, feet.z, unverified, foot_pixels, foot_hits);
           for (std::size_t n = 0; n < unverified; ++n) {
             const std::size_t i = unverified_voxels[n];
             const std::size_t p = std::size_t(pixels[i].row) * columns + pixels[i].column;

@@ -338,10 +338,10 @@ std::optional<ProjectedPixel> LidarModel::solveProjection(const Eigen::Vector3f&
 // scalar path. Cloned for AVX2 (eight lanes instead of four; without FMA,
 // so every operation rounds as in solveProjection and the pixels are the same).
 RANGE_IMAGE_MAPPING_AVX2_CLONES
-void LidarModel::projectMany(const Eigen::Vector3f* points, std::size_t count, ProjectedPixel* pixels,
-                             uint8_t* hits) const {
+void LidarModel::projectMany(const float* x_all, const float* y_all, const float* z_all, std::size_t count,
+                             ProjectedPixel* pixels, uint8_t* hits) const {
   constexpr std::size_t kBlock = 256;
-  alignas(32) float x[kBlock], y[kBlock], rho_squared[kBlock], rho[kBlock], dz[kBlock];
+  alignas(32) float rho_squared[kBlock], rho[kBlock], dz[kBlock];
   alignas(32) float sin_elevation[kBlock], offset_cos[kBlock], offset_sin[kBlock], offset[kBlock];
   alignas(32) float ray_length[kBlock], encoder_angle[kBlock], cell_low[kBlock], cell_high[kBlock];
   alignas(32) float range[kBlock];
@@ -352,13 +352,11 @@ void LidarModel::projectMany(const Eigen::Vector3f* points, std::size_t count, P
   const float columns = static_cast<float>(intrinsics_.columns);
   for (std::size_t start = 0; start < count; start += kBlock) {
     const std::size_t n = std::min(kBlock, count - start);
-    const Eigen::Vector3f* block = points + start;
-    for (std::size_t i = 0; i < n; ++i) {
-      x[i] = block[i].x();
-      y[i] = block[i].y();
-      dz[i] = block[i].z() - beam_origin_z_;
-    }
+    const float* x = x_all + start;
+    const float* y = y_all + start;
+    const float* z = z_all + start;
     for (std::size_t i = 0; i < n; ++i) {  // vectorised
+      dz[i] = z[i] - beam_origin_z_;
       rho_squared[i] = x[i] * x[i] + y[i] * y[i];
       rho[i] = std::sqrt(rho_squared[i]);
       const float planar = rho[i] - r0;
@@ -416,7 +414,7 @@ void LidarModel::projectMany(const Eigen::Vector3f* points, std::size_t count, P
         continue;
       }
       if (!same_row[i]) {
-        const std::optional<ProjectedPixel> pixel = solveProjection(block[i], -1);
+        const std::optional<ProjectedPixel> pixel = solveProjection(Eigen::Vector3f(x[i], y[i], z[i]), -1);
         hits[start + i] = pixel.has_value();
         if (pixel) pixels[start + i] = *pixel;
         continue;
@@ -424,6 +422,21 @@ void LidarModel::projectMany(const Eigen::Vector3f* points, std::size_t count, P
       hits[start + i] = 1;
       pixels[start + i] = {column[i], row[i], range[i]};
     }
+  }
+}
+
+void LidarModel::projectMany(const Eigen::Vector3f* points, std::size_t count, ProjectedPixel* pixels,
+                             uint8_t* hits) const {
+  constexpr std::size_t kChunk = 256;
+  float x[kChunk], y[kChunk], z[kChunk];
+  for (std::size_t start = 0; start < count; start += kChunk) {
+    const std::size_t n = std::min(kChunk, count - start);
+    for (std::size_t i = 0; i < n; ++i) {
+      x[i] = points[start + i].x();
+      y[i] = points[start + i].y();
+      z[i] = points[start + i].z();
+    }
+    projectMany(x, y, z, n, pixels + start, hits + start);
   }
 }
 
