@@ -436,15 +436,23 @@ TEST(MeshExtractor, RebuildsChangedBlocksAndTheirLowerNeighboursOnly) {
   const auto grown = sphereDistance(centre, radius + 0.4 * voxel);
   for (const BlockKey& key : modified) {
     VoxelBlock* block = grid.find(key);
+    const std::vector<float> before = block->sdf;
     for (int k = 0; k < 8; ++k)
       for (int j = 0; j < 8; ++j)
         for (int i = 0; i < 8; ++i)
           block->sdf[i + 8 * (j + 8 * k)] =
               float(std::clamp(grown(grid.voxelPosition(key, i, j, k)), -3 * voxel, 3 * voxel));
     block->changed_generation = generation;
+    // The block itself, and the lower neighbours whose cubes and gradients
+    // read a changed voxel: those within 3 layers of its faces toward them.
     for (int n = 0; n < 8; ++n) {
       const BlockKey lower = key - Eigen::Vector3i(n & 1, (n >> 1) & 1, n >> 2);
-      if (grid.find(lower)) expected_changed.insert({lower.x(), lower.y(), lower.z()});
+      bool reads_a_change = false;
+      for (int k = 0; k < (n & 4 ? 3 : 8); ++k)
+        for (int j = 0; j < (n & 2 ? 3 : 8); ++j)
+          for (int i = 0; i < (n & 1 ? 3 : 8); ++i)
+            reads_a_change = reads_a_change || block->sdf[i + 8 * (j + 8 * k)] != before[i + 8 * (j + 8 * k)];
+      if (grid.find(lower) && (n == 0 || reads_a_change)) expected_changed.insert({lower.x(), lower.y(), lower.z()});
     }
   }
   const MeshUpdate update = extractor.update(grid);
@@ -491,6 +499,57 @@ TEST(MeshExtractor, RebuildsChangedBlocksAndTheirLowerNeighboursOnly) {
   extractor.clear();
   EXPECT_TRUE(extractor.chunks().empty());
   EXPECT_EQ(extractor.triangleCount(), 0u);
+}
+
+// A lower neighbour reads only the first three voxel layers of a block
+// across the faces it lies below: it is re-meshed only when one of the
+// voxels it reads changed, and the mesh stays the full extraction's.
+TEST(MeshExtractor, RemeshesALowerNeighbourOnlyWhenWhatItReadsChanged) {
+  for (const bool intensity : {false, true}) {
+    FillOptions fill;
+    if (intensity) fill.intensity = [](const Eigen::Vector3d& p) { return 10.0 * p.x(); };
+    const Eigen::Vector3d centre(0.123, -0.456, 0.0789);
+    VoxelBlockGrid grid = sphereGrid(0.05, 8, centre, 1.0, fill);
+    MeshExtractor extractor;
+    extractor.update(grid);
+    // A surface block with all 7 lower neighbours.
+    const VoxelBlock* chosen = nullptr;
+    for (const MeshChunk* chunk : extractor.chunks()) {
+      int lower_neighbours = 0;
+      for (int n = 1; n < 8; ++n)
+        lower_neighbours += grid.find(chunk->key - Eigen::Vector3i(n & 1, (n >> 1) & 1, n >> 2)) != nullptr;
+      if (lower_neighbours == 7) {
+        chosen = grid.find(chunk->key);
+        break;
+      }
+    }
+    ASSERT_NE(chosen, nullptr);
+    const BlockKey key = chosen->key;
+    VoxelBlock& block = *grid.find(key);
+    const auto lowerNeighbours = [&](std::vector<int> offsets) {
+      std::vector<BlockKey> keys;
+      for (int n : offsets) keys.push_back(key - Eigen::Vector3i(n & 1, (n >> 1) & 1, n >> 2));
+      return sortedKeys(keys);
+    };
+    // Voxel (i, j, k) of the block changed (a value, a weight or an
+    // intensity), then one update: what it re-meshed.
+    const auto change = [&](int i, int j, int k, int what) {
+      const int index = i + 8 * (j + 8 * k);
+      if (what == 0) block.sdf[index] += 0.001f;
+      if (what == 1) block.weight[index] += 1.0f;
+      if (what == 2) block.intensity[index] += 1.0f;
+      block.changed_generation = grid.nextGeneration();
+      return extractor.update(grid).changed;
+    };
+    block.changed_generation = grid.nextGeneration();  // marked, nothing changed
+    EXPECT_EQ(extractor.update(grid).changed, lowerNeighbours({0}));
+    EXPECT_EQ(change(7, 7, 7, 0), lowerNeighbours({0}));     // no lower neighbour reads it
+    EXPECT_EQ(change(2, 5, 6, 0), lowerNeighbours({0, 1}));  // the one below along x
+    EXPECT_EQ(change(6, 1, 2, 1), lowerNeighbours({0, 2, 4, 6}));
+    if (intensity) EXPECT_EQ(change(6, 6, 0, 2), lowerNeighbours({0, 4}));
+    EXPECT_EQ(change(0, 2, 1, 0), lowerNeighbours({0, 1, 2, 3, 4, 5, 6, 7}));
+    expectSameMesh(extractor.combined(), extractMesh(grid));
+  }
 }
 
 // With a budget of blocks per update, changed blocks wait oldest first: the

@@ -7,7 +7,6 @@
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tsl/robin_map.h>
-#include <tsl/robin_set.h>
 
 #include <Eigen/Geometry>
 
@@ -20,6 +19,7 @@
 #include <chrono>
 #include <cfloat>
 #include <cmath>
+#include <cstring>
 #include <sstream>
 
 namespace range_image_mapping::mapping {
@@ -680,13 +680,59 @@ namespace {
 // enough for both threads to stay busy, few enough to overshoot little.
 constexpr std::size_t kBlocksPerBudgetBatch = 64;
 
+// What a block's lower neighbours read of it: BlockMesher::load copies voxel
+// layers 0-2 of a +1 neighbour across each axis the neighbour lies above
+// along. Per lower neighbour (entry n - 1 for neighbour n: bit 0 below along
+// x, bit 1 y, bit 2 z), a fingerprint of that region's SDF, weight and
+// intensity bits, so any change that can reach its chunk changes it.
+using ReadRegionFingerprints = std::array<uint64_t, 7>;
+
+class Fingerprint {
+ public:
+  void add(const float* a, const float* b, int count) {
+    for (int i = 0; i < count; ++i) {
+      uint32_t a_bits, b_bits;
+      std::memcpy(&a_bits, a + i, sizeof a_bits);
+      std::memcpy(&b_bits, b + i, sizeof b_bits);
+      // Rotate, mix the word in, multiply by an odd constant: for a given
+      // state each step is a bijection of the word, so one changed word
+      // always changes the state it leaves.
+      hash_ = (((hash_ << 23) | (hash_ >> 41)) ^ (uint64_t(b_bits) << 32 | a_bits)) * 0xff51afd7ed558ccdull;
+    }
+  }
+  uint64_t value() const { return hash_; }
+
+ private:
+  uint64_t hash_ = 0x9E3779B97F4A7C15ull;
+};
+
+ReadRegionFingerprints readRegionFingerprints(const VoxelBlock& block, int edge, bool with_intensity) {
+  constexpr int kLayers = 3;  // as BlockMesher::load reads
+  ReadRegionFingerprints result;
+  for (int neighbour = 1; neighbour < 8; ++neighbour) {
+    const int x_end = neighbour & 1 ? kLayers : edge, y_end = neighbour & 2 ? kLayers : edge,
+              z_end = neighbour & 4 ? kLayers : edge;
+    Fingerprint region;
+    for (int z = 0; z < z_end; ++z)
+      for (int y = 0; y < y_end; ++y) {
+        const int row = edge * (y + edge * z);
+        region.add(block.sdf.data() + row, block.weight.data() + row, x_end);
+        if (with_intensity) region.add(block.intensity.data() + row, block.intensity.data() + row, x_end);
+      }
+    result[neighbour - 1] = region.value();
+  }
+  return result;
+}
+
 }  // namespace
 
 struct MeshExtractor::State {
   tsl::robin_map<BlockKey, MeshChunk, BlockKeyHash> chunks;  // only blocks with triangles
-  // Every block of the grid at the last update: a block that is gone
-  // changes the border cubes of its lower neighbours even if it had no chunk.
-  tsl::robin_set<BlockKey, BlockKeyHash> known_blocks;
+  // Every block of the grid at the last update (a block that is gone
+  // changes the border cubes of its lower neighbours even if it had no
+  // chunk), with the fingerprints of what its lower neighbours read of it
+  // as they last read it (they were re-meshed then, or are waiting).
+  tsl::robin_map<BlockKey, ReadRegionFingerprints, BlockKeyHash> known_blocks;
   // Blocks to re-mesh, with the grid generation at which they first waited.
   tsl::robin_map<BlockKey, uint64_t, BlockKeyHash> pending;
   // Chunks dropped with their blocks, reported by the next update that
@@ -707,10 +753,13 @@ MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
   const bool remesh_all = force_all || grid.generation() < meshed_generation_;
   const uint64_t generation = grid.generation();
 
-  // Blocks whose cubes read a changed block: itself and the 7 lower
-  // neighbours. A block already waiting keeps its place in the queue.
-  const auto markWithLowerNeighbours = [&](const BlockKey& key) {
+  // Blocks whose cubes read a changed block: itself and those of its 7 lower
+  // neighbours that read a changed part of it (bit n - 1 of `unchanged` for
+  // neighbour n, as in ReadRegionFingerprints). A block already waiting
+  // keeps its place in the queue.
+  const auto markWithLowerNeighbours = [&](const BlockKey& key, int unchanged) {
     for (int neighbour = 0; neighbour < 8; ++neighbour) {
+      if (neighbour > 0 && (unchanged >> (neighbour - 1) & 1)) continue;
       const BlockKey lower = key - Eigen::Vector3i(neighbour & 1, (neighbour >> 1) & 1, neighbour >> 2);
       if (grid.find(lower)) state.pending.try_emplace(lower, generation);
     }
@@ -718,18 +767,39 @@ MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
   // A reset or replaced grid: what waits refers to blocks that may be gone.
   if (grid.generation() < meshed_generation_) state.pending.clear();
   std::vector<BlockKey> gone;
-  for (const BlockKey& key : state.known_blocks)
+  for (const auto& [key, fingerprints] : state.known_blocks)
     if (!grid.find(key)) gone.push_back(key);
   for (const BlockKey& key : gone) {
     state.known_blocks.erase(key);
     state.pending.erase(key);
     if (state.chunks.erase(key)) state.unreported_removals.push_back(key);
-    markWithLowerNeighbours(key);
+    markWithLowerNeighbours(key, 0);
   }
-  const std::vector<const VoxelBlock*> blocks = grid.blocks();
-  for (const VoxelBlock* block : blocks) {
-    const bool is_new = state.known_blocks.insert(block->key).second;
-    if (remesh_all || is_new || block->changed_generation > meshed_generation_) markWithLowerNeighbours(block->key);
+  std::vector<const VoxelBlock*> changed;
+  for (const VoxelBlock* block : grid.blocks())
+    if (remesh_all || block->changed_generation > meshed_generation_ || !state.known_blocks.count(block->key))
+      changed.push_back(block);
+  // Fingerprints first (they check the blocks' arrays and may throw): the
+  // state changes only once they are all there.
+  const int edge = grid.blockEdge();
+  const bool with_intensity = grid.options().store_intensity;
+  const std::size_t voxels = std::size_t(grid.voxelsPerBlock());
+  std::vector<ReadRegionFingerprints> fingerprints(changed.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, changed.size(), 64),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                        checkBlockArrays(*changed[i], voxels, with_intensity);
+                        fingerprints[i] = readRegionFingerprints(*changed[i], edge, with_intensity);
+                      }
+                    });
+  for (std::size_t i = 0; i < changed.size(); ++i) {
+    const auto [known, is_new] = state.known_blocks.try_emplace(changed[i]->key, fingerprints[i]);
+    int unchanged = 0;
+    if (!is_new && !remesh_all)
+      for (int region = 0; region < 7; ++region)
+        unchanged |= int(known->second[region] == fingerprints[i][region]) << region;
+    known.value() = fingerprints[i];
+    markWithLowerNeighbours(changed[i]->key, unchanged);
   }
 
   // Oldest first (then by key, so that the order does not depend on the

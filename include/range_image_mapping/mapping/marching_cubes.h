@@ -5,9 +5,9 @@
 // reads only the face, so both cubes of a face agree (the case table is
 // generated from the cube's topology, src/mapping/marching_cubes_cases.h).
 // Incremental: a MeshExtractor re-meshes only the blocks changed
-// since its last update (and their -1 neighbours, whose border cubes read
-// them), keeping one mesh chunk per block, optionally within a time budget
-// per update.
+// since its last update (and those of their -1 neighbours whose border cubes
+// read a changed part of them), keeping one mesh chunk per block, optionally
+// within a time budget per update.
 #pragma once
 
 #include "range_image_mapping/mapping/voxel_block_grid.h"
@@ -109,7 +109,9 @@ class MeshExtractor {
  public:
   explicit MeshExtractor(MeshOptions options = {});
   // Re-meshes the blocks changed since the last call (and their lower
-  // neighbours), in parallel, within the options' budget (the rest wait).
+  // neighbours, unless the first voxel layers they read of the changed block
+  // are as they last read them, by a 64-bit fingerprint per slab), in
+  // parallel, within the options' budget (the rest wait).
   // Blocks removed from the grid lose their chunk. "Changed" means
   // changed_generation above the grid's generation at the last call, or new
   // since the last call; a grid whose generation went backwards (reset or
