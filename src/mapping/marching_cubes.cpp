@@ -73,6 +73,36 @@ inline void voxelRowBits(const float* sdf, const float* weight, int run, float m
   negative = negative_bits;
 }
 
+// One x run of a block (run: the block edge, or 3 for a +1 neighbour across
+// x) copied into the padded arrays, its voxels classified as voxelRowBits
+// does. With SSE2 in whole groups of four: a run of 3 reads one value past
+// its end (still inside the block's arrays, as the run starts a row) and
+// writes one into the padded row's spare slot (BlockMesher::row_).
+inline void loadRun(const float* sdf, const float* weight, const float* intensity, int run, float min_weight,
+                    float* sdf_out, float* intensity_out, uint32_t& observed, uint32_t& negative) {
+#if defined(__SSE2__)
+  uint32_t observed_bits = 0, negative_bits = 0;
+  const __m128 zero = _mm_setzero_ps(), minimum = _mm_set1_ps(min_weight), largest = _mm_set1_ps(FLT_MAX);
+  const __m128 magnitude = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+  for (int x = 0; x < run; x += 4) {
+    const __m128 s = _mm_loadu_ps(sdf + x), w = _mm_loadu_ps(weight + x);
+    _mm_storeu_ps(sdf_out + x, s);
+    if (intensity) _mm_storeu_ps(intensity_out + x, _mm_loadu_ps(intensity + x));
+    const __m128 is_observed = _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(w, zero), _mm_cmpge_ps(w, minimum)),
+                                          _mm_cmple_ps(_mm_and_ps(s, magnitude), largest));
+    observed_bits |= uint32_t(_mm_movemask_ps(is_observed)) << x;
+    negative_bits |= uint32_t(_mm_movemask_ps(_mm_cmplt_ps(s, zero))) << x;
+  }
+  const uint32_t in_run = run >= 32 ? ~0u : (1u << run) - 1u;
+  observed = observed_bits & in_run;
+  negative = negative_bits & in_run;
+#else
+  voxelRowBits(sdf, weight, run, min_weight, observed, negative);
+  std::copy(sdf, sdf + run, sdf_out);
+  if (intensity) std::copy(intensity, intensity + run, intensity_out);
+#endif
+}
+
 // Inline: it runs for a block and its 7 neighbours each time a block is meshed.
 inline void checkBlockArrays(const VoxelBlock& block, std::size_t voxels, bool intensity) {
   if (block.sdf.size() != voxels || block.weight.size() != voxels || (intensity && block.intensity.size() != voxels))
@@ -171,15 +201,16 @@ class BlockMesher {
   }
 
  private:
-  int paddedIndex(int x, int y, int z) const { return x + padded_ * (y + padded_ * z); }
+  int paddedIndex(int x, int y, int z) const { return x + row_ * (y + padded_ * z); }
 
   // Fills the padded arrays; false when the block cannot produce a triangle.
   bool load(const VoxelBlockGrid& grid, const VoxelBlock& block, const MeshOptions& options) {
     edge_ = grid.blockEdge();
     padded_ = edge_ + 3;
-    stride_ = {1, padded_, padded_ * padded_};
+    row_ = (padded_ + 3) & ~3;
+    stride_ = {1, row_, row_ * padded_};
     with_intensity_ = grid.options().store_intensity;
-    const std::size_t padded_voxels = std::size_t(padded_) * padded_ * padded_;
+    const std::size_t padded_voxels = std::size_t(row_) * padded_ * padded_;
     sdf_.resize(padded_voxels);
     if (with_intensity_) intensity_.resize(padded_voxels);
     vertex_of_edge_.resize(3 * std::size_t(edge_ + 1) * (edge_ + 1) * (edge_ + 1), -1);
@@ -227,14 +258,13 @@ class BlockMesher {
           if (!source) continue;  // its bits stay 0: unobserved
           const int voxel = edge_ * ((y - begin.y()) + edge_ * (z - begin.z()));
           uint32_t observed_row, negative_row;
-          voxelRowBits(sdf_in + voxel, weight_in + voxel, run, min_weight, observed_row, negative_row);
-          std::copy(sdf_in + voxel, sdf_in + voxel + run, sdf_out + target);
+          loadRun(sdf_in + voxel, weight_in + voxel, intensity_in ? intensity_in + voxel : nullptr, run, min_weight,
+                  sdf_out + target, intensity_out ? intensity_out + target : nullptr, observed_row, negative_row);
           // Observed values are finite: not negative means >= 0.
           has_negative = has_negative || (observed_row & negative_row) != 0;
           has_positive = has_positive || (observed_row & ~negative_row) != 0;
           observed_bits_[y + padded_ * z] |= observed_row << begin.x();
           negative_bits_[y + padded_ * z] |= negative_row << begin.x();
-          if (intensity_out) std::copy(intensity_in + voxel, intensity_in + voxel + run, intensity_out + target);
         }
     }
     return has_negative && has_positive;
@@ -405,7 +435,9 @@ class BlockMesher {
     return int(chunk.vertices.size()) - 1;
   }
 
-  int edge_ = 0, padded_ = 0;
+  // padded_: voxels per padded edge; row_: floats per x run in sdf_ and
+  // intensity_ (padded_ rounded up to whole groups of four, see loadRun).
+  int edge_ = 0, padded_ = 0, row_ = 0;
   std::array<int, 3> stride_{};
   bool with_intensity_ = false;
   std::vector<float> sdf_, intensity_;
@@ -682,10 +714,16 @@ constexpr std::size_t kBlocksPerBudgetBatch = 64;
 
 // What a block's lower neighbours read of it: BlockMesher::load copies voxel
 // layers 0-2 of a +1 neighbour across each axis the neighbour lies above
-// along. Per lower neighbour (entry n - 1 for neighbour n: bit 0 below along
-// x, bit 1 y, bit 2 z), a fingerprint of that region's SDF, weight and
-// intensity bits, so any change that can reach its chunk changes it.
-using ReadRegionFingerprints = std::array<uint64_t, 7>;
+// along. Per lower neighbour n (bit 0: below along x, bit 1 y, bit 2 z) a
+// fingerprint of that region's SDF, weight and intensity bits as the
+// neighbour last read it, so any change that can reach its chunk changes it.
+// Computed only for neighbours nothing else re-meshes (most lower
+// neighbours of a changed block changed too); bit n - 1 of `valid` says
+// that entry n - 1 holds what neighbour n read.
+struct ReadRegions {
+  std::array<uint64_t, 7> fingerprint{};
+  uint8_t valid = 0;
+};
 
 class Fingerprint {
  public:
@@ -706,22 +744,18 @@ class Fingerprint {
   uint64_t hash_ = 0x9E3779B97F4A7C15ull;
 };
 
-ReadRegionFingerprints readRegionFingerprints(const VoxelBlock& block, int edge, bool with_intensity) {
+uint64_t readRegionFingerprint(const VoxelBlock& block, int neighbour, int edge, bool with_intensity) {
   constexpr int kLayers = 3;  // as BlockMesher::load reads
-  ReadRegionFingerprints result;
-  for (int neighbour = 1; neighbour < 8; ++neighbour) {
-    const int x_end = neighbour & 1 ? kLayers : edge, y_end = neighbour & 2 ? kLayers : edge,
-              z_end = neighbour & 4 ? kLayers : edge;
-    Fingerprint region;
-    for (int z = 0; z < z_end; ++z)
-      for (int y = 0; y < y_end; ++y) {
-        const int row = edge * (y + edge * z);
-        region.add(block.sdf.data() + row, block.weight.data() + row, x_end);
-        if (with_intensity) region.add(block.intensity.data() + row, block.intensity.data() + row, x_end);
-      }
-    result[neighbour - 1] = region.value();
-  }
-  return result;
+  const int x_end = neighbour & 1 ? kLayers : edge, y_end = neighbour & 2 ? kLayers : edge,
+            z_end = neighbour & 4 ? kLayers : edge;
+  Fingerprint region;
+  for (int z = 0; z < z_end; ++z)
+    for (int y = 0; y < y_end; ++y) {
+      const int row = edge * (y + edge * z);
+      region.add(block.sdf.data() + row, block.weight.data() + row, x_end);
+      if (with_intensity) region.add(block.intensity.data() + row, block.intensity.data() + row, x_end);
+    }
+  return region.value();
 }
 
 }  // namespace
@@ -730,9 +764,8 @@ struct MeshExtractor::State {
   tsl::robin_map<BlockKey, MeshChunk, BlockKeyHash> chunks;  // only blocks with triangles
   // Every block of the grid at the last update (a block that is gone
   // changes the border cubes of its lower neighbours even if it had no
-  // chunk), with the fingerprints of what its lower neighbours read of it
-  // as they last read it (they were re-meshed then, or are waiting).
-  tsl::robin_map<BlockKey, ReadRegionFingerprints, BlockKeyHash> known_blocks;
+  // chunk), with what its lower neighbours last read of it.
+  tsl::robin_map<BlockKey, ReadRegions, BlockKeyHash> known_blocks;
   // Blocks to re-mesh, with the grid generation at which they first waited.
   tsl::robin_map<BlockKey, uint64_t, BlockKeyHash> pending;
   // Chunks dropped with their blocks, reported by the next update that
@@ -753,53 +786,71 @@ MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
   const bool remesh_all = force_all || grid.generation() < meshed_generation_;
   const uint64_t generation = grid.generation();
 
-  // Blocks whose cubes read a changed block: itself and those of its 7 lower
-  // neighbours that read a changed part of it (bit n - 1 of `unchanged` for
-  // neighbour n, as in ReadRegionFingerprints). A block already waiting
-  // keeps its place in the queue.
-  const auto markWithLowerNeighbours = [&](const BlockKey& key, int unchanged) {
-    for (int neighbour = 0; neighbour < 8; ++neighbour) {
-      if (neighbour > 0 && (unchanged >> (neighbour - 1) & 1)) continue;
-      const BlockKey lower = key - Eigen::Vector3i(neighbour & 1, (neighbour >> 1) & 1, neighbour >> 2);
-      if (grid.find(lower)) state.pending.try_emplace(lower, generation);
-    }
+  const auto lowerNeighbour = [](const BlockKey& key, int neighbour) -> BlockKey {
+    return key - Eigen::Vector3i(neighbour & 1, (neighbour >> 1) & 1, neighbour >> 2);
+  };
+  // A block already waiting keeps its place in the queue.
+  const auto mark = [&](const BlockKey& key) {
+    if (grid.find(key)) state.pending.try_emplace(key, generation);
   };
   // A reset or replaced grid: what waits refers to blocks that may be gone.
   if (grid.generation() < meshed_generation_) state.pending.clear();
   std::vector<BlockKey> gone;
-  for (const auto& [key, fingerprints] : state.known_blocks)
+  for (const auto& [key, regions] : state.known_blocks)
     if (!grid.find(key)) gone.push_back(key);
   for (const BlockKey& key : gone) {
     state.known_blocks.erase(key);
     state.pending.erase(key);
     if (state.chunks.erase(key)) state.unreported_removals.push_back(key);
-    markWithLowerNeighbours(key, 0);
+    for (int neighbour = 0; neighbour < 8; ++neighbour) mark(lowerNeighbour(key, neighbour));
   }
+  // Blocks whose cubes read a changed block: itself, and those of its 7 lower
+  // neighbours that read a changed part of it.
   std::vector<const VoxelBlock*> changed;
   for (const VoxelBlock* block : grid.blocks())
     if (remesh_all || block->changed_generation > meshed_generation_ || !state.known_blocks.count(block->key))
       changed.push_back(block);
-  // Fingerprints first (they check the blocks' arrays and may throw): the
-  // state changes only once they are all there.
   const int edge = grid.blockEdge();
   const bool with_intensity = grid.options().store_intensity;
   const std::size_t voxels = std::size_t(grid.voxelsPerBlock());
-  std::vector<ReadRegionFingerprints> fingerprints(changed.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, changed.size(), 64),
+  for (const VoxelBlock* block : changed) checkBlockArrays(*block, voxels, with_intensity);
+  for (const VoxelBlock* block : changed) mark(block->key);
+  // A lower neighbour re-meshed anyway (changed itself, or waiting) reads
+  // the block as it is, and its fingerprint is not worth computing; the
+  // others are re-meshed when their region's fingerprint differs from the
+  // one they read (or none is known, or the block is new).
+  struct Look {
+    const VoxelBlock* block;
+    int neighbour;
+    bool is_new;
+    uint64_t fingerprint;
+  };
+  std::vector<Look> looks;
+  for (const VoxelBlock* block : changed) {
+    auto [known, is_new] = state.known_blocks.try_emplace(block->key);
+    ReadRegions& regions = known.value();
+    if (remesh_all) regions.valid = 0;
+    for (int neighbour = 1; neighbour < 8; ++neighbour) {
+      const BlockKey lower = lowerNeighbour(block->key, neighbour);
+      if (grid.find(lower) && !state.pending.count(lower))
+        looks.push_back({block, neighbour, is_new, 0});
+      else
+        regions.valid &= uint8_t(~(1u << (neighbour - 1)));
+    }
+  }
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, looks.size(), 64),
                     [&](const tbb::blocked_range<std::size_t>& range) {
-                      for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                        checkBlockArrays(*changed[i], voxels, with_intensity);
-                        fingerprints[i] = readRegionFingerprints(*changed[i], edge, with_intensity);
-                      }
+                      for (std::size_t i = range.begin(); i != range.end(); ++i)
+                        looks[i].fingerprint = readRegionFingerprint(*looks[i].block, looks[i].neighbour, edge,
+                                                                     with_intensity);
                     });
-  for (std::size_t i = 0; i < changed.size(); ++i) {
-    const auto [known, is_new] = state.known_blocks.try_emplace(changed[i]->key, fingerprints[i]);
-    int unchanged = 0;
-    if (!is_new && !remesh_all)
-      for (int region = 0; region < 7; ++region)
-        unchanged |= int(known->second[region] == fingerprints[i][region]) << region;
-    known.value() = fingerprints[i];
-    markWithLowerNeighbours(changed[i]->key, unchanged);
+  for (const Look& look : looks) {
+    ReadRegions& regions = state.known_blocks.find(look.block->key).value();
+    const uint8_t bit = uint8_t(1u << (look.neighbour - 1));
+    if (look.is_new || !(regions.valid & bit) || regions.fingerprint[look.neighbour - 1] != look.fingerprint)
+      mark(lowerNeighbour(look.block->key, look.neighbour));
+    regions.fingerprint[look.neighbour - 1] = look.fingerprint;
+    regions.valid |= bit;
   }
 
   // Oldest first (then by key, so that the order does not depend on the
