@@ -234,11 +234,17 @@ class BlockMesher {
       if (neighbours_[neighbour]) checkBlockArrays(*neighbours_[neighbour], voxels, with_intensity_);
     }
     const float min_weight = options.min_weight;
-    if (!mayCrossZero(block, min_weight)) return false;
     observed_bits_.assign(std::size_t(padded_) * padded_, 0u);
     negative_bits_.assign(std::size_t(padded_) * padded_, 0u);
     bool has_negative = false, has_positive = false;
     for (int neighbour = 0; neighbour < 8; ++neighbour) {
+      // The block's own voxels are in (neighbour 0 comes first): without an
+      // observed one no cube can be meshed; with one sign only, the first
+      // layer of the +1 neighbours decides before they are copied.
+      if (neighbour == 1 && !(has_negative && has_positive)) {
+        if (!has_negative && !has_positive) return false;
+        if (!neighboursCrossZero(has_negative ? 1 : 2, min_weight)) return false;
+      }
       const Eigen::Vector3i offset(neighbour & 1, (neighbour >> 1) & 1, neighbour >> 2);
       const VoxelBlock* source = neighbours_[neighbour];
       const Eigen::Vector3i begin = offset * edge_;
@@ -270,14 +276,13 @@ class BlockMesher {
     return has_negative && has_positive;
   }
 
-  // Whether the values the block's cubes read (its own voxels and the first
-  // layer of its +1 neighbours) hold both signs among observed voxels; if
-  // not, no cube has a zero crossing. Most blocks of a map hold none (free
-  // space, or wholly behind a surface): this look costs far less than
-  // load's copy. Every cube has its lower corner in the block, so a block
-  // without an observed voxel has none either.
-  bool mayCrossZero(const VoxelBlock& block, float min_weight) const {
-    int signs = 0;  // bit 0: an observed negative value, bit 1: an observed non-negative one
+  // Whether the first layer of the +1 neighbours (what the block's cubes
+  // read beyond its own voxels) holds an observed value of the sign the
+  // block lacks (`signs` bit 0: the block has an observed negative value,
+  // bit 1: an observed non-negative one); if not, no cube has a zero
+  // crossing. Most blocks of a map hold none (free space, or wholly behind a
+  // surface): this look costs far less than copying the neighbours.
+  bool neighboursCrossZero(int signs, float min_weight) const {
     const auto look = [&](const float* sdf, const float* weight, int begin, int end) {
       for (int i = begin; i < end; i += 32) {
         uint32_t observed, negative;
@@ -286,10 +291,6 @@ class BlockMesher {
         signs |= int((observed & negative) != 0) | int((observed & ~negative) != 0) << 1;
       }
     };
-    const int voxels = edge_ * edge_ * edge_;
-    look(block.sdf.data(), block.weight.data(), 0, voxels);
-    if (signs == 3) return true;
-    if (signs == 0) return false;
     for (int neighbour = 1; neighbour < 8; ++neighbour) {
       const Eigen::Vector3i offset(neighbour & 1, (neighbour >> 1) & 1, neighbour >> 2);
       const VoxelBlock* source = neighbours_[neighbour];
