@@ -733,15 +733,24 @@ class Fingerprint {
       uint32_t a_bits, b_bits;
       std::memcpy(&a_bits, a + i, sizeof a_bits);
       std::memcpy(&b_bits, b + i, sizeof b_bits);
-      // Rotate, mix the word in, multiply by an odd constant: for a given
-      // state each step is a bijection of the word, so one changed word
-      // always changes the state it leaves.
-      hash_ = (((hash_ << 23) | (hash_ >> 41)) ^ (uint64_t(b_bits) << 32 | a_bits)) * 0xff51afd7ed558ccdull;
+      mix(uint64_t(b_bits) << 32 | a_bits);
+    }
+  }
+  void add(const float* a, int count) {
+    for (int i = 0; i < count; ++i) {
+      uint32_t bits;
+      std::memcpy(&bits, a + i, sizeof bits);
+      mix(bits);
     }
   }
   uint64_t value() const { return hash_; }
 
  private:
+  // Rotate, mix the word in, multiply by an odd constant: for a given state
+  // each step is a bijection of the word, and for a given word one of the
+  // state, so one changed word always changes the final value.
+  void mix(uint64_t word) { hash_ = (((hash_ << 23) | (hash_ >> 41)) ^ word) * 0xff51afd7ed558ccdull; }
+
   uint64_t hash_ = 0x9E3779B97F4A7C15ull;
 };
 
@@ -754,7 +763,7 @@ uint64_t readRegionFingerprint(const VoxelBlock& block, int neighbour, int edge,
     for (int y = 0; y < y_end; ++y) {
       const int row = edge * (y + edge * z);
       region.add(block.sdf.data() + row, block.weight.data() + row, x_end);
-      if (with_intensity) region.add(block.intensity.data() + row, block.intensity.data() + row, x_end);
+      if (with_intensity) region.add(block.intensity.data() + row, x_end);
     }
   return region.value();
 }
