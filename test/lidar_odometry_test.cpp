@@ -352,6 +352,39 @@ TEST(LidarOdometry, ASuddenChangeOfVelocityBreaksTheAccelerationLimit) {
   EXPECT_FALSE(first_step.limit_exceeded) << first_step.warning;
 }
 
+// Good scans give a velocity; then only the floor is seen for half a second
+// while the sensor keeps moving, and the decaying prior falls behind it by a
+// quarter metre and several degrees. When the room is seen again, the
+// registration finds the true pose: measured from the last trusted pose over
+// the time since, its motion is the steady one and is trusted. (Measured from
+// the prior's pose, the correction looked like 36 m/s^2, was refused, and the
+// prior drifted on for ever.)
+TEST(LidarOdometry, ARegistrationIsTrustedAgainAfterThePriorFellBehind) {
+  LidarOdometry odometry;
+  OdometryUpdate update;
+  const Eigen::Isometry3d first = steadyMotion(0.0);
+  for (int k = 0; k < 3; ++k) update = odometry.process(roomScan(steadyMotion, k * kScanPeriodS, 0.0));
+  ASSERT_FALSE(update.degenerate) << update.warning;
+  for (int k = 3; k < 8; ++k) {
+    update = odometry.process(roomScan(steadyMotion, k * kScanPeriodS, 0.0, true));
+    ASSERT_TRUE(update.degenerate) << "scan " << k;
+  }
+  const Eigen::Isometry3d truth_at_7 = first.inverse() * steadyMotion(7 * kScanPeriodS);
+  ASSERT_GT((truth_at_7.inverse() * update.pose).translation().norm(), 0.1) << "the prior did not fall behind";
+  int untrusted = 0;
+  for (int k = 8; k < 16; ++k) {
+    update = odometry.process(roomScan(steadyMotion, k * kScanPeriodS, 0.0));
+    expectFinite(update);
+    untrusted += update.degenerate;
+    EXPECT_FALSE(update.degenerate) << "scan " << k << ": " << update.warning;
+  }
+  EXPECT_EQ(untrusted, 0);
+  const Eigen::Isometry3d error = (first.inverse() * steadyMotion(15 * kScanPeriodS)).inverse() * update.pose;
+  EXPECT_LT(error.translation().norm(), 0.02);
+  EXPECT_LT(rotationDegrees(error), 0.2);
+  EXPECT_NEAR(update.linear_velocity.norm(), std::sqrt(2.0 * 2.0 + 0.5 * 0.5 + 0.1 * 0.1), 0.05);
+}
+
 // Good scans give a velocity; then only the floor is seen (degenerate): the
 // prior carries the velocity on, decaying by exp(-dt / velocity_decay_time_s)
 // each scan instead of for ever.

@@ -82,6 +82,9 @@ void LidarOdometry::reset() {
   has_target_ = false;
   velocity_known_ = false;
   last_stamp_ns_ = 0;
+  trusted_pose_.setIdentity();
+  trusted_stamp_ns_ = 0;
+  trusted_twist_.setZero();
 }
 
 OdometryUpdate LidarOdometry::process(const RangeImage& scan) {
@@ -148,6 +151,12 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
     return finish();
   }
   const double dt = double(stamp - last_stamp_ns_) * 1e-9;
+  // The registered motion, from the last trusted pose (the previous one
+  // unless that step fell back to the prior).
+  const double since_trusted_s = double(stamp - trusted_stamp_ns_) * 1e-9;
+  const auto motionSinceTrusted = [&](const Eigen::Isometry3d& target_from_current) {
+    return twistBetween(trusted_pose_, target_pose_ * target_from_current, since_trusted_s);
+  };
 
   // Constant-velocity prior, the model rendered where it puts the scan, the
   // deskewed source registered to it.
@@ -216,7 +225,7 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
     for (int k = 0; k < max_steps && isFinite(result.target_from_source); ++k) {
       const bool redeskewed = measurable && passes < options_.deskew_passes;
       if (redeskewed) {
-        const Vector6d measured_twist = twistBetween(pose_, target_pose_ * result.target_from_source, dt);
+        const Vector6d measured_twist = motionSinceTrusted(result.target_from_source);
         deskew_twist = kMeasuredTwistShare * measured_twist + (1.0 - kMeasuredTwistShare) * deskew_twist;
         ++passes;
       }
@@ -249,8 +258,8 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
   // than the static world, or a wrong minimum: not trusted.
   Twist registered_twist = Twist::Zero();
   if (degeneracy.empty()) {
-    registered_twist = twistBetween(pose_, target_pose_ * result.target_from_source, dt);
-    const std::string limit = physicalLimitBroken(registered_twist, dt);
+    registered_twist = motionSinceTrusted(result.target_from_source);
+    const std::string limit = physicalLimitBroken(registered_twist, since_trusted_s);
     if (!limit.empty()) {
       update.limit_exceeded = true;
       update.warning = "registration not trusted, " + limit + ": motion prior used";
@@ -282,6 +291,11 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
   }
   pose_ = orthonormalized(target_pose_ * target_from_current);
   last_stamp_ns_ = stamp;
+  if (!update.degenerate && isFinite(pose_) && twist_.allFinite()) {  // else finish() undoes the step
+    trusted_pose_ = pose_;
+    trusted_stamp_ns_ = stamp;
+    trusted_twist_ = twist_;
+  }
 
   // The next target: this scan deskewed with the velocity just estimated.
   const bool deskewed = options_.deskew && computeColumnMotion(scan, stamp, twist_, column_motion_);
@@ -344,7 +358,7 @@ std::string LidarOdometry::physicalLimitBroken(const Twist& twist, double dt_s) 
   if (options_.max_angular_rate_radps > 0.0 && rate > options_.max_angular_rate_radps)
     return "angular rate " + text(rate, options_.max_angular_rate_radps, "rad/s", "max_angular_rate");
   if (options_.max_acceleration_mps2 > 0.0 && velocity_known_) {
-    const double acceleration = (twist.tail<3>() - twist_.tail<3>()).norm() / dt_s;
+    const double acceleration = (twist.tail<3>() - trusted_twist_.tail<3>()).norm() / dt_s;
     if (acceleration > options_.max_acceleration_mps2)
       return "acceleration " + text(acceleration, options_.max_acceleration_mps2, "m/s^2", "max_acceleration");
   }
@@ -370,6 +384,9 @@ void LidarOdometry::restart(const RangeImage& scan, uint64_t stamp_ns) {
   addKeyframe(scan, false);
   target_pose_ = pose_;
   last_stamp_ns_ = stamp_ns;
+  trusted_pose_ = pose_;
+  trusted_stamp_ns_ = stamp_ns;
+  trusted_twist_.setZero();
   has_target_ = true;
 }
 

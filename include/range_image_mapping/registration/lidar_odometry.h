@@ -160,8 +160,9 @@ class LidarOdometry {
 
  private:
   void restart(const RangeImage& scan, uint64_t stamp_ns);
-  // Which physical limit a registered motion breaks ("" if none), against the
-  // current velocity for the acceleration.
+  // Which physical limit a registered motion breaks ("" if none): the motion
+  // since the last trusted step, over dt_s, against that step's velocity for
+  // the acceleration.
   std::string physicalLimitBroken(const Twist& twist, double dt_s) const;
   void moveColumns(const VertexNormalMap& measured, VertexNormalMap& moved) const;
   bool provisional(const RangeImage& scan) const;
@@ -179,6 +180,12 @@ class LidarOdometry {
   bool has_target_ = false;
   bool velocity_known_ = false;  // twist_ was measured since the last restart
   uint64_t last_stamp_ns_ = 0;
+  // The last trusted step: registered motion is measured from its pose over
+  // the time since, so that steps which fell back to the prior (which drifts
+  // from the sensor) do not make a right registration look like a jump.
+  Eigen::Isometry3d trusted_pose_ = Eigen::Isometry3d::Identity();
+  uint64_t trusted_stamp_ns_ = 0;
+  Eigen::Matrix<double, 6, 1> trusted_twist_ = Eigen::Matrix<double, 6, 1>::Zero();
   // Reused buffers: the scan's points as measured, deskewed, and the target.
   VertexNormalMap measured_, deskewed_;
   std::vector<ColumnMotion> column_motion_;  // per column: [R | t] to the scan time
