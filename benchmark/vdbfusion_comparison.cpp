@@ -12,7 +12,12 @@
 // - Ours: TsdfIntegrator with its defaults otherwise, on --threads TBB
 //   threads, the true sweep twist (it projects voxels into the moving sensor);
 //   the incremental mesh (MeshExtractor, no time budget) updated after every
-//   scan as a 10 Hz Mapper would; a full extraction (extractMesh) at the end.
+//   scan as a 10 Hz Mapper would; a full extraction (extractMesh) at the end,
+//   timed twice: first on memory the process never touched (as in the table),
+//   then repeated at once on what the first freed. VDBFusion runs after our
+//   run has freed its grid and meshes, so its extraction takes no page faults
+//   (measured: 0, where our first one takes ~15 000 on outdoor_car); the
+//   repeat compares the two on the same footing.
 // - VDBFusion as its examples run it: VDBVolume(voxel, truncation, no space
 //   carving), constant weight 1, ExtractTriangleMesh(fill_holes, min_weight 5);
 //   also min_weight 1 (timed too). Its Integrate and ExtractTriangleMesh are
@@ -81,6 +86,9 @@ struct SystemRun {
   // Ours, per scan: blocks integrated, voxels projected and written, chunks re-meshed.
   std::vector<double> blocks_touched, voxels_selected, voxels_updated, chunks_rebuilt;
   std::vector<MeshScore> meshes;
+  // Ours: the full extraction repeated at once (the same mesh), on memory
+  // the first one freed, as VDBFusion's runs on what our run freed.
+  double warm_extraction_s = 0.0;
 };
 
 MeshScore scoreMesh(const std::string& name, const TriangleMesh& mesh, double extraction_s,
@@ -119,9 +127,15 @@ SystemRun runOurs(const test::MappingPreset& preset, const test::SimulatedMappin
     run.mesh_update_s.push_back(meshing.wall());
     run.chunks_rebuilt.push_back(double(update.changed.size()));
   }
-  const Timer full;
+  double full_s = 0.0;
+  {
+    const Timer full;
+    const TriangleMesh first = mapping::extractMesh(grid);
+    full_s = full.wall();
+  }
+  const Timer warm;
   const TriangleMesh mesh = mapping::extractMesh(grid);
-  const double full_s = full.wall();
+  run.warm_extraction_s = warm.wall();
   run.meshes.push_back(scoreMesh("rim", mesh, full_s, preset, sequence));
   return run;
 }
@@ -263,10 +277,12 @@ int run(int argc, char** argv) {
     printRun(preset.name, 1, peer);
     const double ours_ms = mean(ours.integrate_wall_s) * 1e3, peer_ms = mean(peer.integrate_wall_s) * 1e3;
     std::printf("%s: integration VDBFusion / rim per scan %.2fx in wall time (rim %d threads, VDBFusion 1), "
-                "%.2fx in CPU time; full extraction VDBFusion (w>=%g) / rim %.2fx; rim's incremental update "
-                "median %.1f ms\n",
+                "%.2fx in CPU time; full extraction VDBFusion (w>=%g) / rim %.2fx (rim repeated at once, on the "
+                "memory its first extraction freed, as VDBFusion's runs on what rim's run freed: %.0f ms, %.2fx); "
+                "rim's incremental update median %.1f ms\n",
                 preset.name.c_str(), peer_ms / ours_ms, options.threads, mean(peer.integrate_cpu_s) / mean(ours.integrate_cpu_s),
                 double(kPeerMinWeights[0]), peer.meshes[0].extraction_s / ours.meshes[0].extraction_s,
+                ours.warm_extraction_s * 1e3, peer.meshes[0].extraction_s / ours.warm_extraction_s,
                 percentile(ours.mesh_update_s, 0.5) * 1e3);
     std::fflush(stdout);
   }
