@@ -251,6 +251,12 @@ TEST(LidarOdometry, RejectsOptionsThatCannotWork) {
   options.model.keyframes = 0;
   EXPECT_THROW(LidarOdometry{options}, std::invalid_argument);
   options = {};
+  options.model.keyframe_range_share = -0.1;
+  EXPECT_THROW(LidarOdometry{options}, std::invalid_argument);
+  options = {};
+  options.model.max_keyframe_distance_m = std::numeric_limits<double>::infinity();
+  EXPECT_THROW(LidarOdometry{options}, std::invalid_argument);
+  options = {};
   options.deskew_passes = -1;
   EXPECT_THROW(LidarOdometry{options}, std::invalid_argument);
   options = {};

@@ -30,11 +30,11 @@ LidarModelConstPtr sensor() {
 
 // Every pixel sees a cylinder wall of this radius around the sensor (and the
 // floor below it): a scan with a point and a normal everywhere.
-RangeImage cylinderScan(float radius_m) {
-  RangeImage image(sensor());
+RangeImage cylinderScan(float radius_m, const LidarModelConstPtr& model = sensor()) {
+  RangeImage image(model);
   for (int v = 0; v < image.rows(); ++v)
     for (int u = 0; u < image.columns(); ++u) {
-      const Eigen::Vector3f direction = sensor()->direction(u, v);
+      const Eigen::Vector3f direction = model->direction(u, v);
       image.range[image.index(v, u)] = radius_m / direction.head<2>().norm();
     }
   return image;
@@ -106,7 +106,9 @@ TEST(LocalModel, KeepsTheNearestSurfaceAndOnItTheNewestKeyframe) {
 
 TEST(LocalModel, DropsTheOldestKeyframeAndReplacesAProvisionalOne) {
   const std::vector<int> strides{1};
-  LocalModel model(LocalModelOptions{2, 1.0, 0.0});
+  LocalModelOptions options{2, 1.0, 0.0};
+  options.keyframe_range_share = 0.0;  // not raised with the scene (see below)
+  LocalModel model(options);
   // Rows 0.25 deg apart: the option's distance is the one in use.
   const LidarModel dense(LidarIntrinsics::synthetic(128, 256, 16.0 * kDegree, -16.0 * kDegree));
   ASSERT_DOUBLE_EQ(keyframeDistance(model.options(), dense), 1.0);
@@ -156,6 +158,55 @@ TEST(LocalModel, KeyframeDistanceFollowsTheSensorsRowSpacing) {
   EXPECT_FALSE(model.wantsKeyframe(pose, vlp16));
   pose.translation().x() = 2.1;
   EXPECT_TRUE(model.wantsKeyframe(pose, vlp16));
+}
+
+// The distance follows the scene: keyframe_range_share (0.2) of the newest
+// keyframe's median range, between keyframe_distance_m (0.5 m) and
+// max_keyframe_distance_m (1.5 m), which does not lower a sparse sensor's.
+TEST(LocalModel, KeyframeDistanceFollowsTheScenesScale) {
+  const LocalModelOptions options;
+  ASSERT_DOUBLE_EQ(options.keyframe_distance_m, 0.5);
+  ASSERT_DOUBLE_EQ(options.keyframe_range_share, 0.2);
+  ASSERT_DOUBLE_EQ(options.max_keyframe_distance_m, 1.5);
+  const LidarModelConstPtr dense =
+      std::make_shared<const LidarModel>(LidarIntrinsics::synthetic(128, 256, 16.0 * kDegree, -16.0 * kDegree));
+  const std::vector<int> strides{2, 1};
+  LocalModel model(options);
+  EXPECT_DOUBLE_EQ(model.keyframeDistance(*dense), 0.5);  // empty: no scene yet
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  const auto addCylinder = [&](float radius_m) {
+    model.add(pyramid(cylinderScan(radius_m, dense), strides), pose, false);
+    // The wall's median range: the radius over the median row's cosine.
+    EXPECT_NEAR(model.newestMedianRange(), radius_m, 0.02 * radius_m);
+  };
+  addCylinder(2.0f);  // a room: 0.4 m, so the least distance
+  EXPECT_DOUBLE_EQ(model.keyframeDistance(*dense), 0.5);
+  addCylinder(5.0f);
+  EXPECT_NEAR(model.keyframeDistance(*dense), 1.0, 0.02);
+  EXPECT_DOUBLE_EQ(model.keyframeDistance(*dense), 0.2 * model.newestMedianRange());
+  pose.translation().x() = 0.9;
+  EXPECT_FALSE(model.wantsKeyframe(pose, *dense));
+  pose.translation().x() = 1.1;
+  EXPECT_TRUE(model.wantsKeyframe(pose, *dense));
+  addCylinder(20.0f);  // a street: capped
+  EXPECT_DOUBLE_EQ(model.keyframeDistance(*dense), 1.5);
+  pose.translation().x() += 1.4;
+  EXPECT_FALSE(model.wantsKeyframe(pose, *dense));
+  pose.translation().x() += 0.2;
+  EXPECT_TRUE(model.wantsKeyframe(pose, *dense));
+  // The cap does not lower a sparse sensor's 2 m.
+  EXPECT_NEAR(model.keyframeDistance(LidarModel(*catalogSensor("VLP-16"))), 2.0, 0.01);
+  // Share 0: the least distance; distance 0: every scan, whatever the scene.
+  LocalModelOptions off = options;
+  off.keyframe_range_share = 0.0;
+  LocalModel fixed(off);
+  fixed.add(pyramid(cylinderScan(20.0f, dense), strides), Eigen::Isometry3d::Identity(), false);
+  EXPECT_DOUBLE_EQ(fixed.keyframeDistance(*dense), 0.5);
+  LocalModel every(LocalModelOptions{4, 0.0, 0.0});
+  every.add(pyramid(cylinderScan(20.0f, dense), strides), Eigen::Isometry3d::Identity(), false);
+  EXPECT_DOUBLE_EQ(every.keyframeDistance(*dense), 0.0);
+  EXPECT_TRUE(every.wantsKeyframe(Eigen::Isometry3d::Identity(), *dense));
+  EXPECT_THROW(LocalModel(LocalModelOptions{4, 0.5, 0.0, 1.0, -0.2}), std::invalid_argument);
 }
 
 // A sparse sensor (8 rows 4 deg apart) over a flat floor 1.5 m below it:

@@ -134,6 +134,7 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
   if (!has_target_) {
     restart(scan, stamp);
     update.reset = true;
+    update.keyframe = true;
     update.restart = RestartReason::kFirstScan;
     return finish();
   }
@@ -148,6 +149,7 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
     update.restart = stamp < last_stamp_ns_ ? RestartReason::kTimeWentBack : RestartReason::kTimeGap;
     restart(scan, stamp);
     update.reset = true;
+    update.keyframe = true;
     return finish();
   }
   const double dt = double(stamp - last_stamp_ns_) * 1e-9;
@@ -340,7 +342,11 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
   if (update.suspect) update.covariance *= kSuspectCovarianceScale;
   // A step that fell back to the prior has an uncertain pose: the model waits
   // for a registered one, unless it has nothing deskewed yet.
-  if ((!update.degenerate || model_.provisional()) && model_.wantsKeyframe(pose_, *scan.model)) addKeyframe(scan, deskewed);
+  update.keyframe_distance_m = model_.keyframeDistance(*scan.model);
+  if ((!update.degenerate || model_.provisional()) && model_.wantsKeyframe(pose_, *scan.model)) {
+    addKeyframe(scan, deskewed);
+    update.keyframe = true;
+  }
   return finish();
 }
 

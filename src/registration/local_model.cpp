@@ -57,6 +57,10 @@ LocalModel::LocalModel(LocalModelOptions options) : options_(options) {
     throw std::invalid_argument("local model: keyframe distance and angle must be finite and not negative");
   if (!(options_.normal_radius_m >= 0.0) || !std::isfinite(options_.normal_radius_m))
     throw std::invalid_argument("local model: normal_radius_m must be finite and not negative (0: off)");
+  if (!(options_.keyframe_range_share >= 0.0) || !std::isfinite(options_.keyframe_range_share) ||
+      !(options_.max_keyframe_distance_m >= 0.0) || !std::isfinite(options_.max_keyframe_distance_m))
+    throw std::invalid_argument("local model: keyframe_range_share and max_keyframe_distance_m must be finite and "
+                                "not negative (0: off)");
 }
 
 void LocalModel::clear() { keyframes_.clear(); }
@@ -72,10 +76,17 @@ double keyframeDistance(const LocalModelOptions& options, const LidarModel& mode
   return std::max(options.keyframe_distance_m, kKeyframeDistancePerSpacing_m_rad * d);
 }
 
+double LocalModel::keyframeDistance(const LidarModel& model) const {
+  const double least_m = registration::keyframeDistance(options_, model);
+  if (!(least_m > 0.0)) return 0.0;
+  return std::max(least_m, std::min(options_.max_keyframe_distance_m,
+                                    options_.keyframe_range_share * newestMedianRange()));
+}
+
 bool LocalModel::wantsKeyframe(const Eigen::Isometry3d& odom_from_lidar, const LidarModel& model) const {
   if (keyframes_.empty() || keyframes_.back().provisional) return true;
   const Eigen::Isometry3d from_newest = keyframes_.back().odom_from_lidar.inverse() * odom_from_lidar;
-  const double distance_m = keyframeDistance(options_, model);
+  const double distance_m = keyframeDistance(model);
   const bool distance = distance_m > 0.0, angle = options_.keyframe_angle_rad > 0.0;
   if (!distance && !angle) return true;
   return (distance && from_newest.translation().norm() >= distance_m) ||
@@ -108,6 +119,17 @@ void LocalModel::add(const std::vector<VertexNormalMap>& levels, const Eigen::Is
       level.points.push_back(map.points[i]);
       level.normals.push_back(map.normals[i]);
     }
+  }
+  // The scene's scale: the median of every kRangeSampleStep-th point's range.
+  constexpr std::size_t kRangeSampleStep = 16;
+  ranges_.clear();
+  if (!keyframe.levels.empty())
+    for (std::size_t i = 0; i < keyframe.levels.back().points.size(); i += kRangeSampleStep)
+      ranges_.push_back(keyframe.levels.back().points[i].norm());
+  keyframe.median_range_m = 0.0;
+  if (!ranges_.empty()) {
+    std::nth_element(ranges_.begin(), ranges_.begin() + ranges_.size() / 2, ranges_.end());
+    keyframe.median_range_m = ranges_[ranges_.size() / 2];
   }
   keyframes_.push_back(std::move(keyframe));
   if (options_.normal_radius_m > 0.0) computeModelNormals();

@@ -390,6 +390,7 @@ void OdometryNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
   status.add("out of order", window.out_of_order);
   status.add("rejected messages", window.rejected);
   status.add("condition number", last_update_.condition_number);
+  status.add("keyframe distance in use (m)", last_update_.keyframe_distance_m);
   status.add("last warning", last_warning_);
   if (window.frames == 0)
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "no range images");

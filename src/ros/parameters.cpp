@@ -302,6 +302,10 @@ OdometryParameters readOdometryParameters(const ros::NodeHandle& private_node) {
       M_PI / 180.0;
   odometry.model.normal_radius_m =
       reader.getDouble("model_normal_radius", odometry_defaults.model.normal_radius_m, 0.0, 100.0);
+  odometry.model.keyframe_range_share =
+      reader.getDouble("keyframe_range_share", odometry_defaults.model.keyframe_range_share, 0.0, 100.0);
+  odometry.model.max_keyframe_distance_m =
+      reader.getDouble("max_keyframe_distance", odometry_defaults.model.max_keyframe_distance_m, 0.0, 1000.0);
   odometry.max_time_gap_s = reader.getDouble("max_time_gap", odometry_defaults.max_time_gap_s, 1e-3, 3600.0);
   odometry.moving_margin_m = reader.getDouble("moving_margin", odometry_defaults.moving_margin_m, 0.0, 100.0);
   odometry.moving_warning_share =

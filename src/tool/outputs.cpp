@@ -46,6 +46,8 @@ registration::OdometryOptions OdometryCommandLine::options() const {
   options.registration.area_weight_max_range_m = area_weight_max_range_m;
   options.model.keyframe_distance_m = keyframe_distance_m;
   options.model.keyframe_angle_rad = keyframe_angle_deg * M_PI / 180.0;
+  options.model.keyframe_range_share = keyframe_range_share;
+  options.model.max_keyframe_distance_m = max_keyframe_distance_m;
   options.model.normal_radius_m = model_normal_radius_m;
   return options;
 }
@@ -61,7 +63,9 @@ Json::Value OdometryCommandLine::json(const LidarModel* sensor) const {
   json["area_weight_max_range_m"] = area_weight_max_range_m;
   if (sensor) json["area_weight_range_in_use_m"] = registration::areaWeightRange(options().registration, *sensor);
   json["keyframe_distance_m"] = keyframe_distance_m;
-  if (sensor) json["keyframe_distance_in_use_m"] = registration::keyframeDistance(options().model, *sensor);
+  if (sensor) json["keyframe_distance_least_m"] = registration::keyframeDistance(options().model, *sensor);
+  json["keyframe_range_share"] = keyframe_range_share;
+  json["max_keyframe_distance_m"] = max_keyframe_distance_m;
   json["keyframe_angle_deg"] = keyframe_angle_deg;
   json["model_normal_radius_m"] = model_normal_radius_m;
   return json;
@@ -123,6 +127,15 @@ void addOdometryOptions(Command& command, OdometryCommandLine& odometry) {
   command.option("--keyframe-angle", odometry.keyframe_angle_deg, "... or after this rotation, degrees (0: off)")
       .showDefault()
       .check(nonNegative());
+  command.option("--keyframe-range-share", odometry.keyframe_range_share,
+                 "the keyframe distance is raised to this share of the newest keyframe's median range, up to "
+                 "--max-keyframe-distance (0: off)")
+      .showDefault()
+      .check(nonNegative());
+  command.option("--max-keyframe-distance", odometry.max_keyframe_distance_m,
+                 "... up to this distance, m (it does not lower --keyframe-distance or a sparse sensor's)")
+      .showDefault()
+      .check(nonNegative());
   command.option("--model-normal-radius", odometry.model_normal_radius_m,
                  "the local model's normals from its keyframes' points within this radius, m (0: each "
                  "keyframe's own, from its scan's neighbouring pixels)")
@@ -167,8 +180,10 @@ void OdometryHealth::add(const registration::OdometryUpdate& update) {
   resets_ += update.reset && frames_ > 0;
   skipped_ += update.skipped;
   ++frames_;
+  keyframes_ += update.keyframe;
   if (update.skipped || update.reset) return;
   ++registered_;
+  keyframe_distance_m_ += update.keyframe_distance_m;
   inlier_share_ += update.inlierShare();
   moving_share_ += update.movingShare();
   most_moving_share_ = std::max(most_moving_share_, update.movingShare());
@@ -187,6 +202,8 @@ Json::Value OdometryHealth::json() const {
   json["mean_moving_share"] = moving_share_ / registered;
   json["max_moving_share"] = most_moving_share_;
   json["mean_prior_difference_m"] = prior_difference_m_ / registered;
+  json["keyframes"] = keyframes_;
+  json["keyframe_distance_in_use_m"] = keyframe_distance_m_ / registered;  // mean over registered scans
   return json;
 }
 
@@ -196,7 +213,8 @@ std::string OdometryHealth::line() const {
   text.precision(3);
   text << degenerate_ << " degenerate (" << untrusted_ << " untrusted), " << suspect_ << " suspect, " << resets_
        << " resets, " << skipped_ << " skipped; pixels paired " << 100.0 * inlier_share_ / registered
-       << " %, moving " << 100.0 * moving_share_ / registered << " % (most " << 100.0 * most_moving_share_ << " %)";
+       << " %, moving " << 100.0 * moving_share_ / registered << " % (most " << 100.0 * most_moving_share_
+       << " %); " << keyframes_ << " keyframes " << keyframe_distance_m_ / registered << " m apart";
   return text.str();
 }
 
@@ -230,7 +248,8 @@ int reportHealth(const OdometryHealth& health) {
 OdometryFramesCsv::OdometryFramesCsv(const std::string& path) : path_(path), file_(path) {
   if (!file_) throw std::runtime_error("cannot write " + path);
   file_ << "frame,time_s,seconds,inliers,iterations,condition_number,residual_rms_m,degenerate,reset,"
-           "skipped,valid_pixels,inlier_share,moving_share,prior_difference_m,prior_difference_deg,warning\n";
+           "skipped,valid_pixels,inlier_share,moving_share,prior_difference_m,prior_difference_deg,keyframe,"
+           "keyframe_distance_m,warning\n";
 }
 
 void OdometryFramesCsv::add(int frame, const registration::OdometryUpdate& update) {
@@ -241,7 +260,8 @@ void OdometryFramesCsv::add(int frame, const registration::OdometryUpdate& updat
         << ',' << update.residual_rms_m << ',' << update.degenerate << ',' << update.reset << ','
         << update.skipped << ',' << update.valid_pixels << ',' << update.inlierShare() << ','
         << update.movingShare() << ',' << update.prior_difference_m << ','
-        << update.prior_difference_rad * 180.0 / M_PI << ',' << warning << '\n';
+        << update.prior_difference_rad * 180.0 / M_PI << ',' << update.keyframe << ',' << update.keyframe_distance_m
+        << ',' << warning << '\n';
 }
 
 void OdometryFramesCsv::close() {

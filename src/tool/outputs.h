@@ -46,10 +46,12 @@ struct OdometryCommandLine {
   int model_keyframes = int(registration::LocalModelOptions().keyframes);
   double keyframe_distance_m = registration::LocalModelOptions().keyframe_distance_m;
   double keyframe_angle_deg = registration::LocalModelOptions().keyframe_angle_rad * 180.0 / M_PI;
+  double keyframe_range_share = registration::LocalModelOptions().keyframe_range_share;
+  double max_keyframe_distance_m = registration::LocalModelOptions().max_keyframe_distance_m;
   double model_normal_radius_m = registration::LocalModelOptions().normal_radius_m;
   registration::OdometryOptions options() const;
   // With the recording's sensor, also the values in force with it (the
-  // area weight's cap, the keyframe distance), which sparse rows change.
+  // area weight's cap, the least keyframe distance), which sparse rows change.
   Json::Value json(const LidarModel* sensor = nullptr) const;
 };
 void addOdometryOptions(Command& command, OdometryCommandLine& odometry);
@@ -71,7 +73,7 @@ class OdometryHealth {
   int skipped() const { return skipped_; }
   Json::Value json() const;
   // "N degenerate (U untrusted), S suspect, R resets, K skipped; pixels paired
-  // P %, moving M % (most X %)"
+  // P %, moving M % (most X %); F keyframes D m apart"
   std::string line() const;
   // A warning naming the problem when the run looks wrong ("" if not).
   std::string warning() const;
@@ -79,6 +81,8 @@ class OdometryHealth {
  private:
   int frames_ = 0, registered_ = 0, degenerate_ = 0, untrusted_ = 0, suspect_ = 0, resets_ = 0, skipped_ = 0;
   double inlier_share_ = 0.0, moving_share_ = 0.0, most_moving_share_ = 0.0, prior_difference_m_ = 0.0;
+  int keyframes_ = 0;
+  double keyframe_distance_m_ = 0.0;  // sum over registered scans of the distance in force
 };
 
 // Prints the health warning, if any, to stderr; the exit status: 3 when

@@ -36,6 +36,8 @@ TEST(OdometryParameters, DefaultsWhenNothingIsSet) {
   EXPECT_NEAR(parameters.odometry.model.keyframe_angle_rad, core.model.keyframe_angle_rad, 1e-12);
   EXPECT_EQ(parameters.odometry.model.keyframe_distance_m, core.model.keyframe_distance_m);
   EXPECT_EQ(parameters.odometry.model.keyframes, core.model.keyframes);
+  EXPECT_EQ(parameters.odometry.model.keyframe_range_share, core.model.keyframe_range_share);
+  EXPECT_EQ(parameters.odometry.model.max_keyframe_distance_m, core.model.max_keyframe_distance_m);
   EXPECT_EQ(parameters.odometry.deskew_passes, core.deskew_passes);
   EXPECT_EQ(parameters.odometry.max_speed_mps, core.max_speed_mps);
   EXPECT_NEAR(parameters.odometry.max_angular_rate_radps, core.max_angular_rate_radps, 1e-12);
@@ -58,6 +60,8 @@ TEST(OdometryParameters, ValuesReachTheCoreOptions) {
   node.setParam("normal_method", "covariance");
   node.setParam("deskew", false);
   node.setParam("keyframe_angle_deg", 90.0);
+  node.setParam("keyframe_range_share", 0.0);  // off
+  node.setParam("max_keyframe_distance", 3.0);
   node.setParam("min_inliers", 50);
   node.setParam("gate_grows_with_stride", false);
   node.setParam("deskew_passes", 3);
@@ -85,6 +89,8 @@ TEST(OdometryParameters, ValuesReachTheCoreOptions) {
   EXPECT_EQ(registration.normals.method, NormalMethod::kCovariance);
   EXPECT_FALSE(parameters.odometry.deskew);
   EXPECT_NEAR(parameters.odometry.model.keyframe_angle_rad, M_PI / 2, 1e-12);
+  EXPECT_EQ(parameters.odometry.model.keyframe_range_share, 0.0);
+  EXPECT_EQ(parameters.odometry.model.max_keyframe_distance_m, 3.0);
   EXPECT_EQ(parameters.odometry.min_inliers, 50u);
 }
 

@@ -104,6 +104,10 @@ struct OdometryUpdate {
   // the registration followed something else.
   double prior_difference_m = 0.0;
   double prior_difference_rad = 0.0;
+  // The keyframe distance in force for this scan (LocalModel::keyframeDistance,
+  // with the newest keyframe's scene scale), and whether it became a keyframe.
+  double keyframe_distance_m = 0.0;
+  bool keyframe = false;
   double inlierShare() const { return valid_pixels ? double(inliers) / double(valid_pixels) : 0.0; }
   double movingShare() const { return valid_pixels ? double(moving_pixels) / double(valid_pixels) : 0.0; }
   int iterations = 0;

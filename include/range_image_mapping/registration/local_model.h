@@ -36,11 +36,19 @@ struct LocalModelOptions {
   // normals computed on its own scan (chords across its beam rows, biased
   // on sparse sensors: issue 14).
   double normal_radius_m = 1.0;
+  // The distance follows the scene's scale: it is raised to this share of
+  // the newest keyframe's median range, up to max_keyframe_distance_m, so
+  // that keyframes are about as far apart in view angle in a street as in a
+  // room (a dense sensor's keyframes every 0.5 m on a car doing 0.7 m a scan
+  // made every scan a keyframe and chained one error per scan). 0: off.
+  double keyframe_range_share = 0.2;
+  double max_keyframe_distance_m = 1.5;
 };
 
-// The keyframe distance with a sensor: options.keyframe_distance_m, raised on
-// a sensor with rows a degree or more apart to a metre per degree of its
-// median beam spacing (VLP-16 2 m, HDL-32E 1.33 m; 0 stays 0: every scan).
+// The least keyframe distance with a sensor: options.keyframe_distance_m,
+// raised on a sensor with rows a degree or more apart to a metre per degree
+// of its median beam spacing (VLP-16 2 m, HDL-32E 1.33 m; 0 stays 0: every
+// scan). LocalModel::keyframeDistance raises it further with the scene.
 double keyframeDistance(const LocalModelOptions& options, const LidarModel& model);
 
 class LocalModel {
@@ -52,10 +60,17 @@ class LocalModel {
   std::size_t size() const { return keyframes_.size(); }
   // Pose of the newest keyframe (odometry frame); identity when empty.
   Eigen::Isometry3d newestPose() const;
+  // The keyframe distance in force with the sensor model: the least one
+  // (keyframeDistance(options, model)), raised to keyframe_range_share of the
+  // newest keyframe's median range up to max_keyframe_distance_m (the cap
+  // does not lower the least one); 0 when that is 0.
+  double keyframeDistance(const LidarModel& model) const;
   // Whether a scan at odom_from_lidar, seen by model, is far enough from the
   // newest keyframe to become one (always when empty, or when the newest is
-  // provisional); the distance is keyframeDistance(options, model).
+  // provisional), by keyframeDistance(model) or keyframe_angle_rad.
   bool wantsKeyframe(const Eigen::Isometry3d& odom_from_lidar, const LidarModel& model) const;
+  // The newest keyframe's median range (of its finest level's points); 0 when empty.
+  double newestMedianRange() const { return keyframes_.empty() ? 0.0 : keyframes_.back().median_range_m; }
   // Adds a scan at odom_from_lidar: one map per pyramid level (points and
   // normals in its lidar frame at its scan time, NaN where invalid; each
   // level's normals computed at its own stride, as the registration's target
@@ -88,7 +103,9 @@ class LocalModel {
     Eigen::Isometry3d odom_from_lidar;
     std::vector<Level> levels;
     bool provisional = false;
+    double median_range_m = 0.0;  // of the finest level's points
   };
+  std::vector<float> ranges_;  // add: a sample of the finest level's ranges
   // normal_radius_m > 0: the newest keyframe's normals from the model's points.
   void computeModelNormals();
 
