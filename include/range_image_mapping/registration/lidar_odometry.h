@@ -193,7 +193,9 @@ class LidarOdometry {
   std::vector<VertexNormalMap> keyframe_levels_;
   std::vector<uint8_t> moving_;
   std::vector<uint8_t> stale_;  // behind the model's surface now and in the last scan (see moving_margin_m)
-  std::vector<uint8_t> behind_model_;  // the last classified scan's pixels behind the model's surface
+  // The last classified scan's pixels behind (kBehindModel) or in front of
+  // (kInFrontOfModel) the model's surface, for the two-scan rules.
+  std::vector<uint8_t> model_disagreement_;
   std::vector<ProjectedPixel> projected_;  // classifyMoving: the scan's pixels in the model
   VertexNormalMap source_;  // measured_ without the last scan's moving and stale pixels
   const VertexNormalMap& sourceWithoutMoving();
