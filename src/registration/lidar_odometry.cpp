@@ -47,9 +47,10 @@ constexpr uint8_t kBehindModel = 1, kInFrontOfModel = 2;
 // twice in one pixel once registered; a pose that lags lays them a little
 // *behind* it, the side the stale rule keeps its whole margin on.
 constexpr float kInFrontTwiceMarginShare = 1.0f / 3.0f;
-// ... but never less than the distance between beam rows at the pixel's
-// range: the model's surface between a sparse sensor's rings is that coarse.
-constexpr float kInFrontTwiceRowSpacings = 1.0f;
+// ... but never less than the wider gap between the pixel's beam row and its
+// neighbours at the pixel's range: between a sparse sensor's rings (or a
+// sensor's sparse outer rows) the model's surface is that coarse.
+constexpr float kInFrontTwiceRowGaps = 1.0f;
 
 // With normals from the model, the source's pixels without a normal of their
 // own (a sparse sensor's ground) pair with the model's planes.
@@ -442,7 +443,13 @@ std::size_t LidarOdometry::classifyMoving(const LidarModel& model, const Eigen::
   const Eigen::Isometry3f transform = target_from_current.cast<float>();
   const float margin = float(options_.moving_margin_m);
   const float twice_margin = kInFrontTwiceMarginShare * margin;
-  const float row_spacing_rad = kInFrontTwiceRowSpacings * float(model.intrinsics().medianRowSpacingRad());
+  const std::vector<double>& altitude = model.intrinsics().altitude_rad;
+  std::vector<float> row_gap_rad(altitude.size(), 0.0f);
+  for (std::size_t row = 1; row < altitude.size(); ++row) {
+    const float gap = kInFrontTwiceRowGaps * float(std::abs(altitude[row] - altitude[row - 1]));
+    row_gap_rad[row] = std::max(row_gap_rad[row], gap);
+    row_gap_rad[row - 1] = std::max(row_gap_rad[row - 1], gap);
+  }
   // A stale pixel's surface faces the way the model's does: the same surface
   // moved away, not an edge that uncovers something behind it.
   constexpr float kStaleNormalCosine = 0.9f;
@@ -481,7 +488,8 @@ std::size_t LidarOdometry::classifyMoving(const LidarModel& model, const Eigen::
             if (in_front_m > margin && nearer) {
               moving_[pixel_of[k]] = 1;
               ++count;
-            } else if (nearer && in_front_m > std::max(twice_margin, row_spacing_rad * points[k].norm())) {
+            } else if (nearer &&
+                       in_front_m > std::max(twice_margin, row_gap_rad[std::size_t(pixels[k].row)] * points[k].norm())) {
               moving_[pixel_of[k]] = kInFrontOnce;  // moving if it was in the last scan too (below)
             } else if (-in_front_m > margin && !nearer &&
                        normal.dot(transform.linear() * deskewed_.normals[pixel_of[k]]) > kStaleNormalCosine) {

@@ -61,7 +61,10 @@ struct OdometryOptions {
   double velocity_decay_time_s = 1.0;
   // Moving objects: after registration, a pixel whose point lies this far in
   // front of the model's surface (along the surface normal, towards the
-  // sensor: in space the keyframes saw empty) is moving. Moving pixels are
+  // sensor: in space the keyframes saw empty) is moving; so is one a third
+  // of this in front (at least its beam row's gap at its range) in this
+  // scan and the last at the same pixel (an object creeping up, taken into
+  // each keyframe before it is a whole margin off). Moving pixels are
   // left out of keyframes, so the model (and the map, through the pipeline)
   // keeps the static world; a scan with more than moving_warning_share of
   // its pixels moving is reported. A pixel this far behind the model's
