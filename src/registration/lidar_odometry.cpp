@@ -36,6 +36,22 @@ std::string seconds(double value) {
   return text.str();
 }
 
+// Classification of a pixel against the model's surface (classifyMoving),
+// kept per pixel for the next scan's two-scan rules.
+constexpr uint8_t kBehindModel = 1, kInFrontOfModel = 2;
+// A pixel in front of the model in this scan and the last at the same pixel
+// is moving from this share of moving_margin_m on: an object creeping up
+// behind the car (a car following it) is taken into each new keyframe
+// before it is a whole margin off the last one, and the registration
+// follows it meanwhile. Static surfaces seldom lie in front of the model
+// twice in one pixel once registered; a pose that lags lays them a little
+// *behind* it, the side the stale rule keeps its whole margin on.
+constexpr float kInFrontTwiceMarginShare = 1.0f / 3.0f;
+// ... but never less than the wider gap between the pixel's beam row and its
+// neighbours at the pixel's range: between a sparse sensor's rings (or a
+// sensor's sparse outer rows) the model's surface is that coarse.
+constexpr float kInFrontTwiceRowGaps = 1.0f;
+
 // With normals from the model, the source's pixels without a normal of their
 // own (a sparse sensor's ground) pair with the model's planes.
 RegistrationOptions registrationOptions(const OdometryOptions& options) {
@@ -314,7 +330,7 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
         deskewed_.points[i].allFinite() && (pairs_without_normals || deskewed_.normals[i].allFinite());
   moving_.assign(deskewed_.points.size(), 0);
   stale_.assign(deskewed_.points.size(), 0);
-  if (update.degenerate) behind_model_.clear();
+  if (update.degenerate) model_disagreement_.clear();
   if (!update.degenerate) {
     update.moving_pixels = classifyMoving(*scan.model, target_from_current);
     const double share = update.valid_pixels ? double(update.moving_pixels) / double(update.valid_pixels) : 0.0;
@@ -385,7 +401,7 @@ void LidarOdometry::restart(const RangeImage& scan, uint64_t stamp_ns) {
   deskewed_ = measured_;
   moving_.assign(measured_.points.size(), 0);
   stale_.assign(measured_.points.size(), 0);
-  behind_model_.clear();
+  model_disagreement_.clear();
   model_.clear();
   addKeyframe(scan, false);
   target_pose_ = pose_;
@@ -427,14 +443,23 @@ const VertexNormalMap& LidarOdometry::sourceWithoutMoving() {
 std::size_t LidarOdometry::classifyMoving(const LidarModel& model, const Eigen::Isometry3d& target_from_current) {
   const VertexNormalMap& target = icp_.targetLevel(options_.registration.strides.size() - 1);
   if (!(options_.moving_margin_m > 0.0) || model_.provisional() || target.stride != 1) {
-    behind_model_.clear();
+    model_disagreement_.clear();
     return 0;
   }
   const Eigen::Isometry3f transform = target_from_current.cast<float>();
   const float margin = float(options_.moving_margin_m);
+  const float twice_margin = kInFrontTwiceMarginShare * margin;
+  const std::vector<double>& altitude = model.intrinsics().altitude_rad;
+  std::vector<float> row_gap_rad(altitude.size(), 0.0f);
+  for (std::size_t row = 1; row < altitude.size(); ++row) {
+    const float gap = kInFrontTwiceRowGaps * float(std::abs(altitude[row] - altitude[row - 1]));
+    row_gap_rad[row] = std::max(row_gap_rad[row], gap);
+    row_gap_rad[row - 1] = std::max(row_gap_rad[row - 1], gap);
+  }
   // A stale pixel's surface faces the way the model's does: the same surface
   // moved away, not an edge that uncovers something behind it.
   constexpr float kStaleNormalCosine = 0.9f;
+  constexpr uint8_t kInFrontOnce = 2;  // in moving_ until the two-scan rule below decides
   const std::size_t size = deskewed_.points.size();
   constexpr std::size_t kChunk = 1024;
   // Pixels in a reused buffer: a ProjectedPixel array on the stack is
@@ -469,6 +494,9 @@ std::size_t LidarOdometry::classifyMoving(const LidarModel& model, const Eigen::
             if (in_front_m > margin && nearer) {
               moving_[pixel_of[k]] = 1;
               ++count;
+            } else if (nearer &&
+                       in_front_m > std::max(twice_margin, row_gap_rad[std::size_t(pixels[k].row)] * points[k].norm())) {
+              moving_[pixel_of[k]] = kInFrontOnce;  // moving if it was in the last scan too (below)
             } else if (-in_front_m > margin && !nearer &&
                        normal.dot(transform.linear() * deskewed_.normals[pixel_of[k]]) > kStaleNormalCosine) {
               stale_[pixel_of[k]] = 1;  // behind the model; stale if it was in the last scan too (below)
@@ -481,13 +509,19 @@ std::size_t LidarOdometry::classifyMoving(const LidarModel& model, const Eigen::
   // Stale only when behind the model in this scan and the last one at the
   // same pixel: a vehicle pulling ahead stays in its pixels, while the
   // uncovered edges of static objects move across the image with the sensor.
-  if (behind_model_.size() != size) behind_model_.assign(size, 0);
+  // The same two-scan rule for pixels a little in front of the model.
+  if (model_disagreement_.size() != size) model_disagreement_.assign(size, 0);
+  std::size_t moving_twice = 0;
   for (std::size_t i = 0; i < size; ++i) {
-    const uint8_t behind = stale_[i];
-    stale_[i] = behind && behind_model_[i];
-    behind_model_[i] = behind;
+    const uint8_t now = (stale_[i] ? kBehindModel : 0) | (moving_[i] ? kInFrontOfModel : 0);
+    stale_[i] = stale_[i] && (model_disagreement_[i] & kBehindModel);
+    if (moving_[i] == kInFrontOnce) {
+      moving_[i] = (model_disagreement_[i] & kInFrontOfModel) ? 1 : 0;
+      moving_twice += moving_[i];
+    }
+    model_disagreement_[i] = now;
   }
-  return moving;
+  return moving + moving_twice;
 }
 
 // The scan's pyramid, each level's normals at its own stride (the paper's

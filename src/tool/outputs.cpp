@@ -107,7 +107,8 @@ void addOdometryOptions(Command& command, OdometryCommandLine& odometry) {
       .showDefault()
       .check(nonNegative());
   command.option("--moving-margin", odometry.moving_margin_m,
-                 "a pixel this far in front of the model's surface is moving: left out of the model and the map; "
+                 "a pixel this far in front of the model's surface (a third of it in two scans running) is moving: "
+                 "left out of the model and the map; "
                  "this far behind it, facing the same way, stale: left out of the next registration, m (0: off)")
       .showDefault()
       .check(nonNegative());

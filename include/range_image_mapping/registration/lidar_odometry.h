@@ -61,7 +61,10 @@ struct OdometryOptions {
   double velocity_decay_time_s = 1.0;
   // Moving objects: after registration, a pixel whose point lies this far in
   // front of the model's surface (along the surface normal, towards the
-  // sensor: in space the keyframes saw empty) is moving. Moving pixels are
+  // sensor: in space the keyframes saw empty) is moving; so is one a third
+  // of this in front (at least its beam row's gap at its range) in this
+  // scan and the last at the same pixel (an object creeping up, taken into
+  // each keyframe before it is a whole margin off). Moving pixels are
   // left out of keyframes, so the model (and the map, through the pipeline)
   // keeps the static world; a scan with more than moving_warning_share of
   // its pixels moving is reported. A pixel this far behind the model's
@@ -197,7 +200,9 @@ class LidarOdometry {
   std::vector<VertexNormalMap> keyframe_levels_;
   std::vector<uint8_t> moving_;
   std::vector<uint8_t> stale_;  // behind the model's surface now and in the last scan (see moving_margin_m)
-  std::vector<uint8_t> behind_model_;  // the last classified scan's pixels behind the model's surface
+  // The last classified scan's pixels behind (kBehindModel) or in front of
+  // (kInFrontOfModel) the model's surface, for the two-scan rules.
+  std::vector<uint8_t> model_disagreement_;
   std::vector<ProjectedPixel> projected_;  // classifyMoving: the scan's pixels in the model
   VertexNormalMap source_;  // measured_ without the last scan's moving and stale pixels
   const VertexNormalMap& sourceWithoutMoving();
