@@ -79,6 +79,12 @@ struct ActivationCells {
   // cells that select any voxel of the row, so that a row no activated cell
   // selects is passed over whole.
   std::vector<CellMask> row_selecting_cells;
+  // With at most 8 cells a block (2 x 2 x 2), every activated mask's
+  // selection is tabled: its voxel indices and lattice coordinates, in
+  // index order, start at selection_start[mask] (selection_start[mask + 1]
+  // ends them). Empty with more cells.
+  std::vector<uint32_t> selection_start, selection_index;
+  std::vector<float> selection_i, selection_j, selection_k;
 
   void configure(int edge) {
     if (edge == block_edge) return;
@@ -116,6 +122,26 @@ struct ActivationCells {
           lattice_k[v] = float(k);
           row_selecting_cells[v / edge] |= selecting_cells[v];
         }
+    selection_start.clear();
+    selection_index.clear();
+    selection_i.clear();
+    selection_j.clear();
+    selection_k.clear();
+    if (cells_per_edge <= 2) {
+      constexpr CellMask kMasks = 256;
+      selection_start.reserve(kMasks + 1);
+      for (CellMask mask = 0; mask < kMasks; ++mask) {
+        selection_start.push_back(uint32_t(selection_index.size()));
+        for (std::size_t voxel = 0; voxel < selecting_cells.size(); ++voxel) {
+          if (!(selecting_cells[voxel] & mask)) continue;
+          selection_index.push_back(uint32_t(voxel));
+          selection_i.push_back(lattice_i[voxel]);
+          selection_j.push_back(lattice_j[voxel]);
+          selection_k.push_back(lattice_k[voxel]);
+        }
+      }
+      selection_start.push_back(uint32_t(selection_index.size()));
+    }
   }
   double cellSize(double voxel_size) const { return voxel_size * cell_voxels; }
 };
@@ -859,15 +885,24 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
       uint32_t* selected = buffers.voxel_index.data();
       const std::size_t voxel_rows = std::size_t(edge) * edge;
       std::size_t count = 0;
-      for (std::size_t row = 0; row < voxel_rows; ++row) {
-        if (!(cells.row_selecting_cells[row] & activated)) continue;
-        for (std::size_t v = row * edge, row_end = v + edge; v < row_end; ++v) {
-          if (!(selecting_cells[v] & activated)) continue;
-          selected[count] = uint32_t(v);
-          lattice.x[count] = cell_i[v];
-          lattice.y[count] = cell_j[v];
-          lattice.z[count] = cell_k[v];
-          ++count;
+      if (!cells.selection_start.empty()) {
+        const std::size_t first_selected = cells.selection_start[activated];
+        count = cells.selection_start[activated + 1] - first_selected;
+        std::copy_n(cells.selection_index.data() + first_selected, count, selected);
+        std::copy_n(cells.selection_i.data() + first_selected, count, lattice.x);
+        std::copy_n(cells.selection_j.data() + first_selected, count, lattice.y);
+        std::copy_n(cells.selection_k.data() + first_selected, count, lattice.z);
+      } else {
+        for (std::size_t row = 0; row < voxel_rows; ++row) {
+          if (!(cells.row_selecting_cells[row] & activated)) continue;
+          for (std::size_t v = row * edge, row_end = v + edge; v < row_end; ++v) {
+            if (!(selecting_cells[v] & activated)) continue;
+            selected[count] = uint32_t(v);
+            lattice.x[count] = cell_i[v];
+            lattice.y[count] = cell_j[v];
+            lattice.z[count] = cell_k[v];
+            ++count;
+          }
         }
       }
       transformLattice(first, lattice_steps, lattice.x, lattice.y, lattice.z, count, points.x, points.y, points.z);
