@@ -12,6 +12,7 @@
 #include "range_image_mapping/registration/lidar_odometry.h"
 #include "rim_command.h"
 
+#include <functional>
 #include <gtest/gtest.h>
 
 #include <cstdio>
@@ -20,6 +21,27 @@ namespace range_image_mapping {
 namespace {
 
 using MovingObjects = test::RimCommandTest;
+
+// Runs the odometry over a simulated folder and calls visit(odometry,
+// labels) after each scan with the simulator's actor label per pixel (skipped
+// where the label image does not match the scan's size); returns the scans.
+int runWithLabels(const std::string& folder,
+                  registration::LidarOdometry& odometry,
+                  const std::function<void(const registration::LidarOdometry&, const io::GreyPng&)>& visit) {
+  io::RecordingOptions options;
+  options.input = folder;
+  const io::Recording recording = io::openRecording(options);
+  int frame = 0;
+  io::forEachScan(recording, [&](const RangeImage& scan) {
+    odometry.process(scan);
+    char name[64];
+    std::snprintf(name, sizeof name, "/labels/%06d.png", frame++);
+    const io::GreyPng labels = io::readGreyPng(folder + name);
+    if (labels.pixels.size() == odometry.movingPixels().size()) visit(odometry, labels);
+    return true;
+  });
+  return frame;
+}
 
 TEST_F(MovingObjects, TheStaticWorldWinsWhileTrucksKeepPaceAlongside) {
   // 2.5 s standing, then the ego car and the trucks start together.
@@ -53,25 +75,15 @@ TEST_F(MovingObjects, TheStaticWorldWinsWhileTrucksKeepPaceAlongside) {
 TEST_F(MovingObjects, PixelsCalledMovingAreOnTheActors) {
   constexpr int kFrames = 60;
   ASSERT_EQ(rim("simulate --preset traffic --frames " + std::to_string(kFrames) + " --out " + path("t")).exit_code, 0);
-  io::RecordingOptions options;
-  options.input = path("t");
-  const io::Recording recording = io::openRecording(options);
   registration::LidarOdometry odometry;
   std::size_t called = 0, on_actors = 0;
-  int frame = 0;
-  io::forEachScan(recording, [&](const RangeImage& scan) {
-    odometry.process(scan);
-    char name[64];
-    std::snprintf(name, sizeof name, "t/labels/%06d.png", frame++);
-    const io::GreyPng labels = io::readGreyPng(path(name));
+  runWithLabels(path("t"), odometry, [&](const registration::LidarOdometry& odometry, const io::GreyPng& labels) {
     const std::vector<uint8_t>& moving = odometry.movingPixels();
-    if (labels.pixels.size() != moving.size()) return true;
     for (std::size_t i = 0; i < moving.size(); ++i) {
       if (!moving[i]) continue;
       ++called;
       on_actors += labels.pixels[i] != 0;
     }
-    return true;
   });
   std::cout << called << " pixels called moving, " << on_actors << " of them on actors\n";
   EXPECT_GT(called, 1000u);
@@ -90,29 +102,20 @@ TEST_F(MovingObjects, ACarCreepingUpBehindIsCalledMovingBeforeItHoldsTheCarBack)
   ASSERT_EQ(rim("simulate --preset traffic_hdl64 --frames " + std::to_string(kFrames) + " --out " + path("t")).exit_code,
             0);
   ASSERT_NE(test::readText(path("t/actors.txt")).find("actor 4 car car_behind"), std::string::npos);
-  io::RecordingOptions options;
-  options.input = path("t");
-  const io::Recording recording = io::openRecording(options);
   const auto truth = io::readKittiPosesWithTimes(path("t/poses_kitti.txt"));
   ASSERT_EQ(truth.size(), std::size_t(kFrames));
   registration::LidarOdometry odometry;
   std::size_t car_behind = 0, car_behind_moving = 0;
-  int frame = 0;
-  io::forEachScan(recording, [&](const RangeImage& scan) {
-    odometry.process(scan);
-    char name[64];
-    std::snprintf(name, sizeof name, "t/labels/%06d.png", frame++);
-    const io::GreyPng labels = io::readGreyPng(path(name));
-    const std::vector<uint8_t>& moving = odometry.movingPixels();
-    if (labels.pixels.size() != moving.size()) return true;
-    for (std::size_t i = 0; i < moving.size(); ++i)
-      if (labels.pixels[i] == kCarBehind && odometry.deskewedScan().points[i].allFinite()) {
-        ++car_behind;
-        car_behind_moving += moving[i];
-      }
-    return true;
-  });
-  ASSERT_EQ(frame, kFrames);
+  const int frames =
+      runWithLabels(path("t"), odometry, [&](const registration::LidarOdometry& odometry, const io::GreyPng& labels) {
+        const std::vector<uint8_t>& moving = odometry.movingPixels();
+        for (std::size_t i = 0; i < moving.size(); ++i)
+          if (labels.pixels[i] == kCarBehind && odometry.deskewedScan().points[i].allFinite()) {
+            ++car_behind;
+            car_behind_moving += moving[i];
+          }
+      });
+  ASSERT_EQ(frames, kFrames);
   const Eigen::Vector3d travelled = (truth.front().pose.inverse() * truth.back().pose).translation();
   const double error = (odometry.pose().translation() - travelled).norm();
   std::cout << "traffic_hdl64, " << kFrames << " frames: travelled " << travelled.norm() << " m, end error " << error
