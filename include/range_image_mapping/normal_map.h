@@ -21,6 +21,15 @@ struct NormalMapOptions {
   // (so s times more at level s), is across a depth discontinuity: the pixel
   // sits on an edge and gets no normal.
   float max_range_jump_ratio = 0.1f;
+  // Cross-product normals at full resolution, > 0: a pixel gets a normal
+  // only where it lies within this of the chord between its two neighbours
+  // on each axis (on one plane the beams of one azimuth meet it in a line,
+  // and a ring is straight across a few columns), both neighbours present.
+  // The rows' neighbours then count whatever their range jump: a sparse
+  // sensor's ground rings jump by far more than max_range_jump_ratio, while
+  // a far wall's row against the roof behind it passes the ratio and leaves
+  // the line. 0: the range-jump test alone (one-sided tangents allowed).
+  float max_chord_offset_m = 0.0f;
 };
 
 // Level `stride` of an image: pixel (i, j) is full-resolution pixel

@@ -184,7 +184,7 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
   model_.render(*scan.model, target_pose_, rendered_);
   icp_.setTarget(scan.model, rendered_);
   const Eigen::Isometry3d guess = Eigen::Isometry3d::Identity();  // T_target_current
-  computeVertexNormalMap(scan, 1, options_.registration.normals, measured_);
+  computeVertexNormalMap(scan, 1, normalsFor(options_.registration, *scan.model), measured_);
   icp_.setSource(sourceWithoutMoving());
   // The source is deskewed inside the registration: each column moved by
   // exp((t - t0) twist) before the pose (none for a zero twist or a scan
@@ -323,7 +323,7 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
     deskewed_ = measured_;
   // The pixels the registration may pair: with a normal, or, where the
   // model's normals pair them too, every pixel with a point.
-  const bool pairs_without_normals = icp_.options().pair_source_without_normals;
+  const bool pairs_without_normals = icp_.pairsSourceWithoutNormals();
   update.valid_pixels = 0;
   for (std::size_t i = 0; i < deskewed_.points.size(); ++i)
     update.valid_pixels +=
@@ -397,7 +397,7 @@ void LidarOdometry::restart(const RangeImage& scan, uint64_t stamp_ns) {
   twist_.setZero();
   velocity_known_ = false;
   if (!isFinite(pose_)) pose_.setIdentity();  // never restart from a non-finite pose
-  computeVertexNormalMap(scan, 1, options_.registration.normals, measured_);
+  computeVertexNormalMap(scan, 1, normalsFor(options_.registration, *scan.model), measured_);
   deskewed_ = measured_;
   moving_.assign(measured_.points.size(), 0);
   stale_.assign(measured_.points.size(), 0);
@@ -535,7 +535,7 @@ void LidarOdometry::addKeyframe(const RangeImage& scan, bool deskewed) {
     if (strides[level] == 1) {
       map = deskewed_;
     } else {
-      computeVertexNormalMap(scan, strides[level], options_.registration.normals, map);
+      computeVertexNormalMap(scan, strides[level], normalsFor(options_.registration, *scan.model), map);
       if (deskewed) moveColumns(map, map);
     }
     if (!any_moving) continue;
@@ -548,7 +548,11 @@ void LidarOdometry::addKeyframe(const RangeImage& scan, bool deskewed) {
           map.normals[std::size_t(row) * map.columns + column].setConstant(std::numeric_limits<float>::quiet_NaN());
         }
   }
-  model_.add(keyframe_levels_, pose_, provisional(scan));
+  // Where the scan's normals are checked in line (a sparse sensor's), the
+  // ground has its own and the model's planes, fitted across keyframes'
+  // rings, would only bring back the tilt the check removes.
+  model_.add(keyframe_levels_, pose_, provisional(scan),
+             !(normalsFor(options_.registration, *scan.model).max_chord_offset_m > 0.0f));
 }
 
 // Each column's points and normals, measured at the column's time, moved into

@@ -94,7 +94,8 @@ bool LocalModel::wantsKeyframe(const Eigen::Isometry3d& odom_from_lidar, const L
 }
 
 void LocalModel::add(const std::vector<VertexNormalMap>& levels, const Eigen::Isometry3d& odom_from_lidar,
-                     bool provisional) {
+                     bool provisional, bool model_normals) {
+  model_normals = model_normals && options_.normal_radius_m > 0.0;
   if (!keyframes_.empty() && keyframes_.back().provisional) keyframes_.pop_back();
   if (!keyframes_.empty() && keyframes_.back().levels.size() != levels.size())
     throw std::invalid_argument("local model: a keyframe with " + std::to_string(levels.size()) +
@@ -113,7 +114,6 @@ void LocalModel::add(const std::vector<VertexNormalMap>& levels, const Eigen::Is
     level.stride = map.stride;
     level.points.clear();
     level.normals.clear();
-    const bool model_normals = options_.normal_radius_m > 0.0;
     for (std::size_t i = 0; i < map.points.size(); ++i) {
       if (!map.points[i].allFinite() || (!model_normals && !map.normals[i].allFinite())) continue;
       level.points.push_back(map.points[i]);
@@ -132,7 +132,7 @@ void LocalModel::add(const std::vector<VertexNormalMap>& levels, const Eigen::Is
     keyframe.median_range_m = ranges_[ranges_.size() / 2];
   }
   keyframes_.push_back(std::move(keyframe));
-  if (options_.normal_radius_m > 0.0) computeModelNormals();
+  if (model_normals) computeModelNormals();
 }
 
 namespace {

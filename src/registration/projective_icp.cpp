@@ -229,6 +229,16 @@ constexpr double kAreaWeightSpacing_m_rad2 = 0.0045;
 
 }  // namespace
 
+bool sparseRows(const LidarModel& model) {
+  return model.intrinsics().medianRowSpacingRad() >= M_PI / 180.0;
+}
+
+NormalMapOptions normalsFor(const RegistrationOptions& options, const LidarModel& model) {
+  NormalMapOptions normals = options.normals;
+  if (sparseRows(model)) normals.max_chord_offset_m = float(options.sparse_rows_chord_offset_m);
+  return normals;
+}
+
 double areaWeightRange(const RegistrationOptions& options, const LidarModel& model) {
   const double max_range_m = options.area_weight_max_range_m;
   if (!(max_range_m > 0.0)) return 0.0;
@@ -347,6 +357,8 @@ void validateOptions(const RegistrationOptions& options) {
   if (!(options.max_correspondence_distance_m >= 0.0)) {
     fail("max_correspondence_distance_m must be >= 0 (0: twice the kernel scale)");
   }
+  if (!(options.sparse_rows_chord_offset_m >= 0.0) || !std::isfinite(options.sparse_rows_chord_offset_m))
+    fail("sparse_rows_chord_offset_m must be finite and not negative (0: off)");
   if (!(options.min_normal_cosine >= -1.0 && options.min_normal_cosine <= 1.0)) {
     fail("min_normal_cosine must be within [-1, 1]");
   }
@@ -369,9 +381,10 @@ ProjectiveIcp::ProjectiveIcp(RegistrationOptions options) : options_(std::move(o
 }
 
 void ProjectiveIcp::setTarget(const RangeImage& target) {
+  if (!target.model) throw std::invalid_argument("ProjectiveIcp::setTarget: the range image has no sensor model");
   target_levels_.resize(options_.strides.size());
   for (std::size_t level = 0; level < options_.strides.size(); ++level) {
-    computeVertexNormalMap(target, options_.strides[level], options_.normals, target_levels_[level]);
+    computeVertexNormalMap(target, options_.strides[level], normalsFor(options_, *target.model), target_levels_[level]);
   }
   setTargetModel(target.model);
 }
@@ -394,7 +407,7 @@ void ProjectiveIcp::setTarget(const RangeImage& target, const VertexNormalMap& f
     if (options_.strides[level] == 1)
       target_levels_[level] = full_resolution;
     else
-      computeVertexNormalMap(target, options_.strides[level], options_.normals, target_levels_[level]);
+      computeVertexNormalMap(target, options_.strides[level], normalsFor(options_, *target.model), target_levels_[level]);
   }
   setTargetModel(target.model);
 }
@@ -420,13 +433,18 @@ void ProjectiveIcp::setTargetModel(const LidarModelConstPtr& model) {
   target_index_tables_.resize(target_levels_.size());
   for (std::size_t level = 0; level < target_levels_.size(); ++level)
     target_index_tables_[level].build(target_levels_[level], model->rows(), model->columns());
-  if (model != target_model_) area_weight_range_m_ = registration::areaWeightRange(options_, *model);
+  if (model != target_model_) {
+    area_weight_range_m_ = registration::areaWeightRange(options_, *model);
+    pairs_without_normals_ =
+        options_.pair_source_without_normals && !(normalsFor(options_, *model).max_chord_offset_m > 0.0f);
+  }
   target_model_ = model;
 }
 
 RegistrationResult ProjectiveIcp::align(const RangeImage& source,
                                         const Eigen::Isometry3d& initial_target_from_source) const {
-  computeVertexNormalMap(source, 1, options_.normals, source_map_);
+  if (!source.model) throw std::invalid_argument("ProjectiveIcp::align: the range image has no sensor model");
+  computeVertexNormalMap(source, 1, normalsFor(options_, *source.model), source_map_);
   return align(source_map_, initial_target_from_source);
 }
 
@@ -462,7 +480,7 @@ void ProjectiveIcp::prepareSource(const VertexNormalMap& source) const {
     const int step = std::max(1, options_.strides[level] / source.stride) * options_.source_stride;
     const int rows = (source.rows + step - 1) / step;
     const auto usable = [&](std::size_t i) {
-      return (options_.pair_source_without_normals || std::isfinite(source.normals[i].x())) &&
+      return (pairs_without_normals_ || std::isfinite(source.normals[i].x())) &&
              std::isfinite(source.points[i].x());
     };
     // Two parallel passes over the kept rows: how many pixels each keeps,

@@ -29,6 +29,7 @@ struct LevelNeighbourhood {
   const VertexNormalMap& map;
   ImageView<const float> ranges;  // the image at this level
   float jump_per_pixel;           // max_range_jump_ratio * stride
+  float max_chord_offset_m;       // NormalMapOptions::max_chord_offset_m
   // Per level row, the column shift to the same azimuth in each row of the
   // window (row steps -radius..radius), from the rows' azimuth offsets.
   int radius;
@@ -140,10 +141,41 @@ void crossProductNormalsOfRow(const LevelNeighbourhood& level, int row, Eigen::V
       if (after || before) return true;
       return neighbour(after_row, after_column, after, 2) && neighbour(before_row, before_column, before, 2);
     };
+    const bool in_line = level.max_chord_offset_m > 0.0f && map.stride == 1;
+    const auto onChord = [&](const Eigen::Vector3f* after, const Eigen::Vector3f* before) {
+      if (!after || !before) return false;
+      const Eigen::Vector3f chord = *after - *before;
+      return (centre - *before).cross(chord).norm() <= level.max_chord_offset_m * chord.norm();
+    };
+    // In-line rows: the nearest rows with a return on both sides (the next
+    // ones out where both are empty), whatever their ranges.
+    bool rows_in_line = false;
+    if (in_line) {
+      const auto point = [&](const Row& at) -> const Eigen::Vector3f* {
+        if (!at.ranges) return nullptr;
+        const int c = level.wrapColumn(column + at.shift);
+        return isValidRange(at.ranges[std::ptrdiff_t(c) * range_step]) ? at.points + c : nullptr;
+      };
+      down = point(below);
+      up = point(above);
+      if (!down && !up) {
+        down = point(below2);
+        up = point(above2);
+      }
+      rows_in_line = onChord(down, up);
+      if (!rows_in_line) {
+        normals[column] = kInvalid;
+        continue;
+      }
+      along_column = *down - *up;
+    }
     if (!neighbour(centre_row, column + 1, right) || !neighbour(centre_row, column - 1, left) ||
         !farNeighbours(centre_row, column + 2, centre_row, column - 2, right, left) ||
-        !tangentOf(right, left, along_row) || !neighbour(below, column, down) || !neighbour(above, column, up) ||
-        !farNeighbours(below2, column, above2, column, down, up) || !tangentOf(down, up, along_column)) {
+        !tangentOf(right, left, along_row) ||
+        (!rows_in_line && (!neighbour(below, column, down) || !neighbour(above, column, up) ||
+                           !farNeighbours(below2, column, above2, column, down, up) ||
+                           !tangentOf(down, up, along_column))) ||
+        (in_line && !onChord(right, left))) {
       normals[column] = kInvalid;
       continue;
     }
@@ -210,6 +242,8 @@ void computeVertexNormalMap(const RangeImage& image, int stride, const NormalMap
   if (!(options.max_range_jump_ratio > 0.0f)) {
     throw std::invalid_argument("computeVertexNormalMap: max_range_jump_ratio must be positive");
   }
+  if (!(options.max_chord_offset_m >= 0.0f) || !std::isfinite(options.max_chord_offset_m))
+    throw std::invalid_argument("computeVertexNormalMap: max_chord_offset_m must be finite and not negative (0: off)");
 
   const ImageView<const float> view = image.rangeView(stride);
   const LidarModel& model = *image.model;
@@ -260,7 +294,8 @@ void computeVertexNormalMap(const RangeImage& image, int stride, const NormalMap
       row_shifts[std::size_t(row) * (2 * radius + 1) + (step + radius)] = int(std::lround(difference / float(stride)));
     }
   }
-  const LevelNeighbourhood level{out, view, options.max_range_jump_ratio * float(stride), radius, row_shifts};
+  const LevelNeighbourhood level{out, view, options.max_range_jump_ratio * float(stride), options.max_chord_offset_m,
+                               radius, row_shifts};
   tbb::parallel_for(tbb::blocked_range<int>(0, out.rows), [&](const tbb::blocked_range<int>& rows) {
     for (int row = rows.begin(); row != rows.end(); ++row) {
       if (options.method == NormalMethod::kCrossProduct) {

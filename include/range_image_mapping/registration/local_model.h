@@ -77,7 +77,10 @@ class LocalModel {
   // pyramid has them). A provisional keyframe (not deskewed: the first after
   // a restart) is replaced by the next one added. The oldest keyframe beyond
   // `keyframes` is dropped.
-  void add(const std::vector<VertexNormalMap>& levels, const Eigen::Isometry3d& odom_from_lidar, bool provisional);
+  // model_normals false: the keyframe keeps its own normals whatever
+  // normal_radius_m says.
+  void add(const std::vector<VertexNormalMap>& levels, const Eigen::Isometry3d& odom_from_lidar, bool provisional,
+           bool model_normals = true);
   bool provisional() const { return !keyframes_.empty() && keyframes_.back().provisional; }
 
   // The model seen from odom_from_view: for every level (stride as added),

@@ -52,6 +52,13 @@ struct RegistrationOptions {
   double area_weight_max_range_m = 25.0;
   RobustKernel kernel;
   NormalMapOptions normals;
+  // On a sensor with sparse rows (sparseRows), full-resolution normals must
+  // lie on one plane with their neighbours, within this (normalsFor). A
+  // normal across two surfaces, which the range-jump test lets through far
+  // away where rows are metres apart, puts the pair's plane off the true
+  // surface, and the far pairs' leverage turns that into roll and pitch
+  // pulled towards the previous scan's. 0: off.
+  double sparse_rows_chord_offset_m = 0.02;
   double convergence_rotation_rad = 1e-5;   // early exit when an update is smaller
   double convergence_translation_m = 1e-5;
   // Levels before the last stop when an update is below the thresholds times
@@ -62,6 +69,14 @@ struct RegistrationOptions {
     return max_correspondence_distance_m > 0.0 ? max_correspondence_distance_m : 2.0 * kernel.scale_m;
   }
 };
+
+// A sensor whose rows are a degree or more apart (median spacing): VLP-16,
+// HDL-32E, RS-LiDAR-16; not an OS-1-128, HDL-64E or VLP-32C.
+bool sparseRows(const LidarModel& model);
+
+// The normals the registration computes for a sensor's images: options.normals,
+// with sparse_rows_chord_offset_m on a sensor with sparse rows.
+NormalMapOptions normalsFor(const RegistrationOptions& options, const LidarModel& model);
 
 // The area weight's cap with a sensor: options.area_weight_max_range_m,
 // lowered on a sensor with sparse rows (its median beam spacing).
@@ -151,6 +166,10 @@ class ProjectiveIcp {
   // The area weight's cap in use with the current target's sensor: the
   // option, lowered on a sensor with sparse rows (0 before any target).
   double areaWeightRange() const { return area_weight_range_m_; }
+  // Whether source pixels without a normal pair with the current target's
+  // sensor: the option, except where its normals are checked in line
+  // (normalsFor), which then give the ground its own.
+  bool pairsSourceWithoutNormals() const { return pairs_without_normals_; }
 
  private:
   // One level's source pixels with normals, and the full-resolution column
@@ -165,6 +184,7 @@ class ProjectiveIcp {
   RegistrationOptions options_;
   LidarModelConstPtr target_model_;
   double area_weight_range_m_ = 0.0;  // from the target model's beam spacing, once per target sensor
+  bool pairs_without_normals_ = false;  // pairsSourceWithoutNormals(), once per target sensor
   std::vector<VertexNormalMap> target_levels_;  // one per options_.strides entry
   std::vector<LevelPixelTables> target_index_tables_;  // one per options_.strides entry
   // Reused between calls (no per-frame allocation in steady state).
