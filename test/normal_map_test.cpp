@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <cstdio>
 #include <vector>
 
@@ -164,6 +165,11 @@ TEST(NormalMap, RejectsBadInput) {
   EXPECT_THROW(computeVertexNormalMap(image, 0, {}, map), std::invalid_argument);
   NormalMapOptions bad;
   bad.window_radius = 0;
+  EXPECT_THROW(computeVertexNormalMap(image, 1, bad, map), std::invalid_argument);
+  bad = {};
+  bad.max_chord_offset_m = -0.01f;
+  EXPECT_THROW(computeVertexNormalMap(image, 1, bad, map), std::invalid_argument);
+  bad.max_chord_offset_m = std::numeric_limits<float>::quiet_NaN();
   EXPECT_THROW(computeVertexNormalMap(image, 1, bad, map), std::invalid_argument);
   image.column_order = ColumnOrder::kDestaggered;
   EXPECT_THROW(computeVertexNormalMap(image, 1, {}, map), std::invalid_argument);
