@@ -155,13 +155,12 @@ uint8_t partitionOfHash(std::size_t hash) {
   static_assert(LocalModel::kVoxelPartitions == 8, "three bits");
   return uint8_t((uint64_t(hash) * 0x9E3779B97F4A7C15ull) >> 61);
 }
-uint8_t partitionOf(const LatticeKey& key) { return partitionOfHash(LatticeKeyHash()(key)); }
 
 static_assert(sizeof(Eigen::Vector3f) == 3 * sizeof(float) && sizeof(LatticeKey) == 3 * sizeof(int), "xyz triples");
 
 // Points (xyz triples) moved by [R | t] (a 4 x 4 matrix's first 12 floats,
 // column-major), each one's voxel (xyz triples) of the grid 1 / inverse_size
-// wide and its map: as keyOf and partitionOf, over plain arrays so that it
+// wide and its map: as keyOf and partitionOfHash, over plain arrays so that it
 // vectorises. Cloned for AVX2 (no FMA: the same sums in the same order as
 // Eigen's product, so the same floats).
 RANGE_IMAGE_MAPPING_AVX2_CLONES
