@@ -151,9 +151,33 @@ int floorToInt(float value) {
 
 // A voxel's map: high bits of its hash mixed again (the maps index their
 // buckets by the low bits, which must stay spread within each map).
-uint8_t partitionOf(const LatticeKey& key) {
+uint8_t partitionOfHash(std::size_t hash) {
   static_assert(LocalModel::kVoxelPartitions == 8, "three bits");
-  return uint8_t((uint64_t(LatticeKeyHash()(key)) * 0x9E3779B97F4A7C15ull) >> 61);
+  return uint8_t((uint64_t(hash) * 0x9E3779B97F4A7C15ull) >> 61);
+}
+
+static_assert(sizeof(Eigen::Vector3f) == 3 * sizeof(float) && sizeof(LatticeKey) == 3 * sizeof(int), "xyz triples");
+
+// Points (xyz triples) moved by [R | t] (a 4 x 4 matrix's first 12 floats,
+// column-major), each one's voxel (xyz triples) of the grid 1 / inverse_size
+// wide and its map: as keyOf and partitionOfHash, over plain arrays so that it
+// vectorises. Cloned for AVX2 (no FMA: the same sums in the same order as
+// Eigen's product, so the same floats).
+RANGE_IMAGE_MAPPING_AVX2_CLONES
+void moveAndBin(const float* points, std::size_t count, const float* transform, float inverse_size,
+                float* __restrict moved, int* __restrict keys, uint8_t* __restrict partitions) {
+  for (std::size_t k = 0; k < count; ++k) {
+    const float* point = points + 3 * k;
+    int key[3];
+    for (int axis = 0; axis < 3; ++axis) {
+      const float value = ((transform[axis] * point[0] + transform[4 + axis] * point[1]) + transform[8 + axis] * point[2]) +
+                          transform[12 + axis];
+      moved[3 * k + axis] = value;
+      key[axis] = floorToInt(value * inverse_size);
+      keys[3 * k + axis] = key[axis];
+    }
+    partitions[k] = partitionOfHash(LatticeKeyHash()(LatticeKey(key[0], key[1], key[2])));
+  }
 }
 
 }  // namespace
@@ -179,9 +203,13 @@ void LocalModel::computeModelNormals() {
   // takes one look-up. The voxels are split among kVoxelPartitions maps by
   // their key, each summed on its own thread in the points' order, so that
   // every voxel's sums are the same whatever the threads.
+  // The newest keyframe's own points stay as they are (exactly: their
+  // voxels are looked up again below).
   moved_points_.clear();
   for (const Keyframe& keyframe : keyframes_) {
-    const Eigen::Isometry3f newest_from_keyframe = (newest_from_odom * keyframe.odom_from_lidar).cast<float>();
+    const Eigen::Isometry3f newest_from_keyframe = &keyframe == &newest
+                                                       ? Eigen::Isometry3f::Identity()
+                                                       : (newest_from_odom * keyframe.odom_from_lidar).cast<float>();
     const std::vector<Eigen::Vector3f>& points = keyframe.levels.back().points;
     const std::size_t first = moved_points_.size();
     moved_points_.resize(first + points.size());
@@ -189,12 +217,10 @@ void LocalModel::computeModelNormals() {
     partition_of_point_.resize(first + points.size());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 4096),
                       [&](const tbb::blocked_range<std::size_t>& block) {
-                        for (std::size_t i = block.begin(); i < block.end(); ++i) {
-                          const Eigen::Vector3f moved = newest_from_keyframe * points[i];
-                          moved_points_[first + i] = moved;
-                          key_of_point_[first + i] = keyOf(moved);
-                          partition_of_point_[first + i] = partitionOf(key_of_point_[first + i]);
-                        }
+                        const std::size_t i = block.begin();
+                        moveAndBin(points[i].data(), block.size(), newest_from_keyframe.matrix().data(), inverse_size,
+                                   moved_points_[first + i].data(), key_of_point_[first + i].data(),
+                                   &partition_of_point_[first + i]);
                       });
   }
   for (std::vector<uint32_t>& points : points_of_partition_) points.clear();
@@ -204,14 +230,16 @@ void LocalModel::computeModelNormals() {
     voxels.clear();
     VoxelMoments* moments = nullptr;  // valid until the next insertion, which looks up again
     VoxelKey last_key = VoxelKey::Zero();
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
     for (const uint32_t i : points_of_partition_[partition]) {
       const Eigen::Vector3f& moved = moved_points_[i];
       const VoxelKey& key = key_of_point_[i];
       if (!moments || key != last_key) {
         moments = &voxels[key];
         last_key = key;
+        centre = centreOf(key);
       }
-      const Eigen::Vector3d d = moved.cast<double>() - centreOf(key);
+      const Eigen::Vector3d d = moved.cast<double>() - centre;
       moments->count += 1.0;
       moments->sum += d;
       // The lower triangle only: the plane fit reads no other.
@@ -224,28 +252,40 @@ void LocalModel::computeModelNormals() {
     }
   });
   const auto findVoxel = [&](const VoxelKey& key) -> const VoxelMoments* {
-    const VoxelMap& voxels = model_voxels_[partitionOf(key)];
-    const auto found = voxels.find(key);
+    const std::size_t hash = LatticeKeyHash()(key);
+    const VoxelMap& voxels = model_voxels_[partitionOfHash(hash)];
+    const auto found = voxels.find(key, hash);
     return found == voxels.end() ? nullptr : &found->second;
   };
-  // The newest keyframe's voxels (of every level's points) that hold points.
+  // The newest keyframe's voxels (of every level's points) that hold points;
+  // a run of points in one voxel takes one look-up, and the finest level's
+  // voxels are those its points were summed in (the last keyframe's above).
   slot_of_voxel_.clear();
   newest_voxels_.clear();
   slot_of_point_.clear();
-  for (const Level& level : newest.levels)
-    for (const Eigen::Vector3f& point : level.points) {
-      const VoxelKey key = keyOf(point);
-      const auto found = slot_of_voxel_.find(key);
-      if (found != slot_of_voxel_.end()) {
-        slot_of_point_.push_back(found->second);
-      } else if (findVoxel(key)) {
-        slot_of_point_.push_back(uint32_t(newest_voxels_.size()));
-        slot_of_voxel_.emplace(key, uint32_t(newest_voxels_.size()));
-        newest_voxels_.push_back(key);
-      } else {
-        slot_of_point_.push_back(kNoVoxel);
+  const std::size_t newest_first = moved_points_.size() - newest.levels.back().points.size();
+  for (const Level& level : newest.levels) {
+    const bool finest = &level == &newest.levels.back();
+    VoxelKey last_key = VoxelKey::Zero();
+    uint32_t slot = kNoVoxel;
+    for (std::size_t i = 0; i < level.points.size(); ++i) {
+      const VoxelKey key = finest ? key_of_point_[newest_first + i] : keyOf(level.points[i]);
+      if (i == 0 || key != last_key) {
+        last_key = key;
+        const auto found = slot_of_voxel_.find(key);
+        if (found != slot_of_voxel_.end()) {
+          slot = found->second;
+        } else if (findVoxel(key)) {
+          slot = uint32_t(newest_voxels_.size());
+          slot_of_voxel_.emplace(key, slot);
+          newest_voxels_.push_back(key);
+        } else {
+          slot = kNoVoxel;
+        }
       }
+      slot_of_point_.push_back(slot);
     }
+  }
 
   // Each of its voxels' plane over the block.
   const double min_span_squared = (kMinSpan * options_.normal_radius_m) * (kMinSpan * options_.normal_radius_m);
@@ -258,6 +298,8 @@ void LocalModel::computeModelNormals() {
                         const VoxelKey& key = newest_voxels_[v];
                         // The block's moments about the centre voxel's centre: a
                         // neighbour's, about its own centre o away, shifted by o.
+                        // With s' = s + n o: the sum of d' d'^T is outer + s' o^T + o s^T
+                        // (its lower triangle only).
                         double count = 0.0;
                         Eigen::Vector3d sum = Eigen::Vector3d::Zero();
                         Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();
@@ -268,10 +310,12 @@ void LocalModel::computeModelNormals() {
                               if (!found) continue;
                               const VoxelMoments& other = *found;
                               const Eigen::Vector3d offset = Eigen::Vector3d(dx, dy, dz) * voxel_size;
+                              const Eigen::Vector3d shifted = other.sum + other.count * offset;
                               count += other.count;
-                              sum += other.sum + other.count * offset;
-                              outer += other.outer + other.sum * offset.transpose() + offset * other.sum.transpose() +
-                                       other.count * offset * offset.transpose();
+                              sum += shifted;
+                              for (int a = 0; a < 3; ++a)
+                                for (int b = 0; b <= a; ++b)
+                                  outer(a, b) += other.outer(a, b) + shifted(a) * offset(b) + offset(a) * other.sum(b);
                             }
                         slot_normals_[v] = Eigen::Vector3f::Constant(kNaN);
                         if (count < 6.0) continue;
