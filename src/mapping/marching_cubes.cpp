@@ -540,32 +540,44 @@ bool nameLess(const LatticeEdge& a, const LatticeEdge& b) {
          std::array<int, 4>{b.block.x(), b.block.y(), b.block.z(), b.index};
 }
 
-// What the weld reads of a chunk: a MeshChunk's arrays, or those of a chunk
-// kept in a ChunkArena.
+// A vertex other chunks may share (mayBeShared): its name and its index in the chunk.
+using SharedVertex = std::pair<LatticeEdge, int>;
+
+// What the weld reads of a chunk: its arrays (a MeshChunk's, or those of a
+// chunk kept in a ChunkArena) and its vertices other chunks may share,
+// sorted by name (the weld looks a name up there in the chunks around it).
 struct ChunkView {
   BlockKey key = BlockKey::Zero();
-  int block_edge = 0;
-  std::size_t vertex_count = 0, normal_count = 0, intensity_count = 0, name_count = 0, triangle_count = 0;
+  std::size_t vertex_count = 0, triangle_count = 0, shared_count = 0;
+  bool with_intensity = false;
   const Eigen::Vector3f* vertices = nullptr;
   const Eigen::Vector3f* normals = nullptr;
   const float* intensities = nullptr;
-  const LatticeEdge* vertex_edges = nullptr;
   const Eigen::Vector3i* triangles = nullptr;
+  const SharedVertex* shared = nullptr;
 };
 
+// The chunk's shared vertices, sorted by name, into `out` (cleared first).
+void sharedVertices(const MeshChunk& chunk, std::vector<SharedVertex>& out) {
+  out.clear();
+  for (std::size_t v = 0; v < chunk.vertex_edges.size(); ++v)
+    if (mayBeShared(chunk.key, chunk.block_edge, chunk.vertex_edges[v])) out.emplace_back(chunk.vertex_edges[v], int(v));
+  std::sort(out.begin(), out.end(), [](const SharedVertex& a, const SharedVertex& b) { return nameLess(a.first, b.first); });
+}
+
+// The view of a chunk whose arrays have consistent sizes, shared vertices left out.
 ChunkView viewOf(const MeshChunk& chunk) {
+  if (chunk.vertex_edges.size() != chunk.vertices.size() || chunk.normals.size() != chunk.vertices.size())
+    throw MappingError("marching cubes: chunk " + keyText(chunk.key) +
+                       " has vertices, normals and lattice edges of different counts");
   ChunkView view;
   view.key = chunk.key;
-  view.block_edge = chunk.block_edge;
   view.vertex_count = chunk.vertices.size();
-  view.normal_count = chunk.normals.size();
-  view.intensity_count = chunk.intensities.size();
-  view.name_count = chunk.vertex_edges.size();
   view.triangle_count = chunk.triangles.size();
+  view.with_intensity = chunk.intensities.size() == chunk.vertices.size();
   view.vertices = chunk.vertices.data();
   view.normals = chunk.normals.data();
   view.intensities = chunk.intensities.data();
-  view.vertex_edges = chunk.vertex_edges.data();
   view.triangles = chunk.triangles.data();
   return view;
 }
@@ -573,16 +585,18 @@ ChunkView viewOf(const MeshChunk& chunk) {
 // A full extraction's chunks, kept back to back in large segments (one arena
 // per thread) instead of five vectors each: tens of MB of fresh memory,
 // advised as huge pages, so that first touching it costs one page fault per
-// 2 MB instead of one per 4 KB.
+// 2 MB instead of one per 4 KB. Only the shared vertices' names are kept.
 class ChunkArena {
  public:
   ChunkView keep(const MeshChunk& chunk) {
     ChunkView view = viewOf(chunk);
+    sharedVertices(chunk, shared_);
     view.vertices = copy(chunk.vertices);
     view.normals = copy(chunk.normals);
     view.intensities = copy(chunk.intensities);
-    view.vertex_edges = copy(chunk.vertex_edges);
     view.triangles = copy(chunk.triangles);
+    view.shared = copy(shared_);
+    view.shared_count = shared_.size();
     return view;
   }
 
@@ -616,6 +630,7 @@ class ChunkArena {
   };
   std::vector<std::unique_ptr<char, Free>> segments_;
   std::size_t segment_bytes_ = 0, used_ = 0;
+  std::vector<SharedVertex> shared_;
 };
 
 // weldChunksByName's result on threads: a vertex on a lattice edge can only
@@ -624,93 +639,65 @@ class ChunkArena {
 // that cut the edge) is found by looking in those chunks alone; vertices are
 // then numbered by prefix sums, in the serial weld's order. Block edges of 8
 // or 16 voxels only.
-TriangleMesh weldViews(const std::vector<ChunkView>& chunks) {
-  const int edge = chunks.empty() ? 8 : chunks.front().block_edge;
+TriangleMesh weldViews(const std::vector<ChunkView>& chunks, int edge) {
   const std::size_t count = chunks.size();
   std::vector<std::size_t> first_vertex(count + 1, 0), first_triangle(count + 1, 0);
   bool with_intensity = true, any_intensity = false;
   for (std::size_t c = 0; c < count; ++c) {
     const ChunkView& chunk = chunks[c];
-    if (chunk.name_count != chunk.vertex_count || chunk.normal_count != chunk.vertex_count)
-      throw MappingError("marching cubes: chunk " + keyText(chunk.key) +
-                         " has vertices, normals and lattice edges of different counts");
     first_vertex[c + 1] = first_vertex[c] + chunk.vertex_count;
     first_triangle[c + 1] = first_triangle[c] + chunk.triangle_count;
     if (chunk.vertex_count == 0) continue;
-    const bool has = chunk.intensity_count == chunk.vertex_count;
-    any_intensity = any_intensity || has;
-    with_intensity = with_intensity && has;
+    any_intensity = any_intensity || chunk.with_intensity;
+    with_intensity = with_intensity && chunk.with_intensity;
   }
   with_intensity = with_intensity && any_intensity;
   tsl::robin_map<BlockKey, uint32_t, BlockKeyHash> position_of;
   position_of.reserve(count);
   for (std::size_t c = 0; c < count; ++c) position_of.emplace(chunks[c].key, uint32_t(c));
 
-  // Per chunk, its vertices other chunks may share, sorted by name: chunk
-  // c's are shared[first_shared[c], first_shared[c + 1]), in one array.
-  std::vector<std::size_t> first_shared(count + 1, 0);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 16), [&](const tbb::blocked_range<std::size_t>& range) {
-    for (std::size_t c = range.begin(); c != range.end(); ++c) {
-      const ChunkView& chunk = chunks[c];
-      std::size_t shared_count = 0;
-      for (std::size_t v = 0; v < chunk.vertex_count; ++v)
-        shared_count += mayBeShared(chunk.key, edge, chunk.vertex_edges[v]);
-      first_shared[c + 1] = shared_count;
-    }
-  });
-  for (std::size_t c = 0; c < count; ++c) first_shared[c + 1] += first_shared[c];
-  std::vector<std::pair<LatticeEdge, int>> shared;
-  resizeOnHugePages(shared, first_shared[count]);
   // Per chunk vertex: its index in the mesh, or (until resolved) -1 - the
   // flat index of the providing chunk's vertex.
   std::vector<int64_t> remap;
   resizeOnHugePages(remap, first_vertex[count]);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 16), [&](const tbb::blocked_range<std::size_t>& range) {
-    for (std::size_t c = range.begin(); c != range.end(); ++c) {
-      const ChunkView& chunk = chunks[c];
-      auto* const begin = shared.data() + first_shared[c];
-      auto* out = begin;
-      for (std::size_t v = 0; v < chunk.vertex_count; ++v)
-        if (mayBeShared(chunk.key, edge, chunk.vertex_edges[v])) *out++ = {chunk.vertex_edges[v], int(v)};
-      std::sort(begin, out, [](const auto& a, const auto& b) { return nameLess(a.first, b.first); });
-    }
-  });
   const int bits = edge == 8 ? 3 : 4, mask = edge - 1;
   std::vector<std::size_t> provided(count, 0);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 16), [&](const tbb::blocked_range<std::size_t>& range) {
     for (std::size_t c = range.begin(); c != range.end(); ++c) {
       const ChunkView& chunk = chunks[c];
-      std::size_t next = first_vertex[c];
-      for (std::size_t v = 0; v < chunk.vertex_count; ++v) {
-        const LatticeEdge& name = chunk.vertex_edges[v];
-        std::size_t provider = c, provider_vertex = v;
-        if (mayBeShared(chunk.key, edge, name)) {
-          // The cubes around the edge lie in its block and, across each
-          // other axis where the edge is on the block's lower face, the
-          // block below.
-          const int axis = name.index % 3, voxel = name.index / 3;
-          const int lower[3] = {voxel & mask, (voxel >> bits) & mask, voxel >> (2 * bits)};
-          int on_lower_face = 0;
-          for (int other = 0; other < 3; ++other)
-            if (other != axis && lower[other] == 0) on_lower_face |= 1 << other;
-          for (int below = on_lower_face;; below = (below - 1) & on_lower_face) {
-            const BlockKey key = name.block - Eigen::Vector3i(below & 1, (below >> 1) & 1, below >> 2);
-            const auto found = position_of.find(key);
-            if (found != position_of.end() && found->second < provider) {
-              const auto* const candidates = shared.data() + first_shared[found->second];
-              const auto* const candidates_end = shared.data() + first_shared[found->second + 1];
-              const auto* const match = std::lower_bound(
-                  candidates, candidates_end, name, [](const auto& a, const LatticeEdge& b) { return nameLess(a.first, b); });
-              if (match != candidates_end && match->first == name) {
-                provider = found->second;
-                provider_vertex = std::size_t(match->second);
-              }
+      int64_t* const own = remap.data() + first_vertex[c];
+      std::fill(own, own + chunk.vertex_count, 0);  // provided by the chunk itself unless found below
+      for (std::size_t s = 0; s < chunk.shared_count; ++s) {
+        const LatticeEdge& name = chunk.shared[s].first;
+        std::size_t provider = c, provider_vertex = 0;
+        // The cubes around the edge lie in its block and, across each
+        // other axis where the edge is on the block's lower face, the
+        // block below.
+        const int axis = name.index % 3, voxel = name.index / 3;
+        const int lower[3] = {voxel & mask, (voxel >> bits) & mask, voxel >> (2 * bits)};
+        int on_lower_face = 0;
+        for (int other = 0; other < 3; ++other)
+          if (other != axis && lower[other] == 0) on_lower_face |= 1 << other;
+        for (int below = on_lower_face;; below = (below - 1) & on_lower_face) {
+          const BlockKey key = name.block - Eigen::Vector3i(below & 1, (below >> 1) & 1, below >> 2);
+          const auto found = position_of.find(key);
+          if (found != position_of.end() && found->second < provider) {
+            const ChunkView& other = chunks[found->second];
+            const SharedVertex* const candidates_end = other.shared + other.shared_count;
+            const SharedVertex* const match = std::lower_bound(
+                other.shared, candidates_end, name, [](const SharedVertex& a, const LatticeEdge& b) { return nameLess(a.first, b); });
+            if (match != candidates_end && match->first == name) {
+              provider = found->second;
+              provider_vertex = std::size_t(match->second);
             }
-            if (below == 0) break;
           }
+          if (below == 0) break;
         }
-        remap[first_vertex[c] + v] = provider == c ? int64_t(next++) : -1 - int64_t(first_vertex[provider] + provider_vertex);
+        if (provider != c) own[chunk.shared[s].second] = -1 - int64_t(first_vertex[provider] + provider_vertex);
       }
+      std::size_t next = first_vertex[c];
+      for (std::size_t v = 0; v < chunk.vertex_count; ++v)
+        if (own[v] >= 0) own[v] = int64_t(next++);
       provided[c] = next - first_vertex[c];
     }
   });
@@ -762,7 +749,28 @@ TriangleMesh weldChunks(const std::vector<const MeshChunk*>& chunks) {
   std::vector<ChunkView> views;
   views.reserve(chunks.size());
   for (const MeshChunk* chunk : chunks) views.push_back(viewOf(*chunk));
-  return weldViews(views);
+  // The shared vertices of all chunks in one array: chunk c's from first_shared[c].
+  std::vector<std::size_t> first_shared(chunks.size() + 1, 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks.size(), 16), [&](const tbb::blocked_range<std::size_t>& range) {
+    for (std::size_t c = range.begin(); c != range.end(); ++c) {
+      const MeshChunk& chunk = *chunks[c];
+      for (const LatticeEdge& name : chunk.vertex_edges) first_shared[c + 1] += mayBeShared(chunk.key, edge, name);
+    }
+  });
+  for (std::size_t c = 0; c < chunks.size(); ++c) first_shared[c + 1] += first_shared[c];
+  std::vector<SharedVertex> shared;
+  resizeOnHugePages(shared, first_shared[chunks.size()]);
+  tbb::enumerable_thread_specific<std::vector<SharedVertex>> scratch;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks.size(), 16), [&](const tbb::blocked_range<std::size_t>& range) {
+    std::vector<SharedVertex>& sorted = scratch.local();
+    for (std::size_t c = range.begin(); c != range.end(); ++c) {
+      sharedVertices(*chunks[c], sorted);
+      std::copy(sorted.begin(), sorted.end(), shared.begin() + std::ptrdiff_t(first_shared[c]));
+      views[c].shared = shared.data() + first_shared[c];
+      views[c].shared_count = sorted.size();
+    }
+  });
+  return weldViews(views, edge);
 }
 
 double secondsSince(std::chrono::steady_clock::time_point start) {
@@ -804,7 +812,7 @@ TriangleMesh extractMesh(const VoxelBlockGrid& grid, const MeshOptions& options)
                       for (std::size_t i = range.begin(); i != range.end(); ++i)
                         chunks[i] = worker.arena.keep(worker.mesher.build(grid, *blocks[i], options));
                     });
-  return weldViews(chunks);
+  return weldViews(chunks, grid.blockEdge());
 }
 
 std::size_t countBoundaryEdges(const std::vector<Eigen::Vector3i>& triangles) {
