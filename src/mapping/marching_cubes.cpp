@@ -1,5 +1,6 @@
 #include "range_image_mapping/mapping/marching_cubes.h"
 
+#include "huge_pages.h"
 #include "marching_cubes_cases.h"
 #include "number_text.h"
 
@@ -19,7 +20,10 @@
 #include <chrono>
 #include <cfloat>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
+#include <memory>
+#include <new>
 #include <sstream>
 
 namespace range_image_mapping::mapping {
@@ -116,19 +120,33 @@ inline void checkBlockArrays(const VoxelBlock& block, std::size_t voxels, bool i
 // one layer, the one-sided gradient at the far face two more.
 class BlockMesher {
  public:
+  // A chunk of its own, copied once at its size from the reused buffers
+  // build() fills: growing five fresh vectors per chunk cost more
+  // allocations than the copy.
   MeshChunk mesh(const VoxelBlockGrid& grid, const VoxelBlock& block, const MeshOptions& options) {
+    const MeshChunk& built = build(grid, block, options);
     MeshChunk result;
-    result.key = block.key;
-    result.block_edge = grid.blockEdge();
-    if (!load(grid, block, options)) return result;
-    // Built in reused buffers, then copied once at its size: growing five
-    // fresh vectors per chunk cost more allocations than the copy.
+    result.key = built.key;
+    result.block_edge = built.block_edge;
+    result.vertices.assign(built.vertices.begin(), built.vertices.end());
+    result.normals.assign(built.normals.begin(), built.normals.end());
+    result.intensities.assign(built.intensities.begin(), built.intensities.end());
+    result.triangles.assign(built.triangles.begin(), built.triangles.end());
+    result.vertex_edges.assign(built.vertex_edges.begin(), built.vertex_edges.end());
+    return result;
+  }
+
+  // The block's chunk in the mesher's own buffers, valid until the next call.
+  const MeshChunk& build(const VoxelBlockGrid& grid, const VoxelBlock& block, const MeshOptions& options) {
     MeshChunk& chunk = scratch_;
+    chunk.key = block.key;
+    chunk.block_edge = grid.blockEdge();
     chunk.vertices.clear();
     chunk.normals.clear();
     chunk.intensities.clear();
     chunk.triangles.clear();
     chunk.vertex_edges.clear();
+    if (!load(grid, block, options)) return chunk;
     const MarchingCubesCases& cases = MarchingCubesCases::instance();
     std::array<int, 8> corner_offset;
     for (int c = 0; c < 8; ++c)
@@ -192,12 +210,7 @@ class BlockMesher {
       }
     for (int local_edge : vertex_local_edges_) vertex_of_edge_[local_edge] = -1;
     vertex_local_edges_.clear();
-    result.vertices.assign(chunk.vertices.begin(), chunk.vertices.end());
-    result.normals.assign(chunk.normals.begin(), chunk.normals.end());
-    result.intensities.assign(chunk.intensities.begin(), chunk.intensities.end());
-    result.triangles.assign(chunk.triangles.begin(), chunk.triangles.end());
-    result.vertex_edges.assign(chunk.vertex_edges.begin(), chunk.vertex_edges.end());
-    return result;
+    return chunk;
   }
 
  private:
@@ -459,10 +472,9 @@ class BlockMesher {
 // chunk is named after: the four cubes around an edge along `axis` lie in the
 // chunk's block unless the edge's lower end is on one of the block's lower
 // faces across that axis, or in a +1 neighbour.
-bool mayBeShared(const MeshChunk& chunk, const LatticeEdge& name) {
-  const int edge = chunk.block_edge;
+bool mayBeShared(const BlockKey& key, int edge, const LatticeEdge& name) {
   // Block edges are 8 or 16 voxels (VoxelBlockGridOptions::validate): shifts, not divisions.
-  if ((edge != 8 && edge != 16) || name.block != chunk.key) return true;
+  if ((edge != 8 && edge != 16) || name.block != key) return true;
   if (name.index >= 3 * edge * edge * edge) return false;  // a cube's interior vertex
   const int bits = edge == 8 ? 3 : 4, mask = edge - 1;
   const int axis = name.index % 3, voxel = name.index / 3;
@@ -505,7 +517,7 @@ TriangleMesh weldChunksByName(const std::vector<const MeshChunk*>& chunks) {
     remap.resize(chunk->vertices.size());
     for (std::size_t v = 0; v < chunk->vertices.size(); ++v) {
       // Only edges on a block's faces are cut by two chunks: the others skip the hash map.
-      if (mayBeShared(*chunk, chunk->vertex_edges[v])) {
+      if (mayBeShared(chunk->key, chunk->block_edge, chunk->vertex_edges[v])) {
         const auto [found, inserted] =
             vertex_of_edge.try_emplace(chunk->vertex_edges[v], int(mesh.vertices.size()));
         remap[v] = found->second;
@@ -528,83 +540,164 @@ bool nameLess(const LatticeEdge& a, const LatticeEdge& b) {
          std::array<int, 4>{b.block.x(), b.block.y(), b.block.z(), b.index};
 }
 
+// A vertex other chunks may share (mayBeShared): its name and its index in the chunk.
+using SharedVertex = std::pair<LatticeEdge, int>;
+
+// What the weld reads of a chunk: its arrays (a MeshChunk's, or those of a
+// chunk kept in a ChunkArena) and its vertices other chunks may share,
+// sorted by name (the weld looks a name up there in the chunks around it).
+struct ChunkView {
+  BlockKey key = BlockKey::Zero();
+  std::size_t vertex_count = 0, triangle_count = 0, shared_count = 0;
+  bool with_intensity = false;
+  const Eigen::Vector3f* vertices = nullptr;
+  const Eigen::Vector3f* normals = nullptr;
+  const float* intensities = nullptr;
+  const Eigen::Vector3i* triangles = nullptr;
+  const SharedVertex* shared = nullptr;
+};
+
+// The chunk's shared vertices, sorted by name, into `out` (cleared first).
+void sharedVertices(const MeshChunk& chunk, std::vector<SharedVertex>& out) {
+  out.clear();
+  for (std::size_t v = 0; v < chunk.vertex_edges.size(); ++v)
+    if (mayBeShared(chunk.key, chunk.block_edge, chunk.vertex_edges[v])) out.emplace_back(chunk.vertex_edges[v], int(v));
+  std::sort(out.begin(), out.end(), [](const SharedVertex& a, const SharedVertex& b) { return nameLess(a.first, b.first); });
+}
+
+// The view of a chunk whose arrays have consistent sizes, shared vertices left out.
+ChunkView viewOf(const MeshChunk& chunk) {
+  if (chunk.vertex_edges.size() != chunk.vertices.size() || chunk.normals.size() != chunk.vertices.size())
+    throw MappingError("marching cubes: chunk " + keyText(chunk.key) +
+                       " has vertices, normals and lattice edges of different counts");
+  ChunkView view;
+  view.key = chunk.key;
+  view.vertex_count = chunk.vertices.size();
+  view.triangle_count = chunk.triangles.size();
+  view.with_intensity = chunk.intensities.size() == chunk.vertices.size();
+  view.vertices = chunk.vertices.data();
+  view.normals = chunk.normals.data();
+  view.intensities = chunk.intensities.data();
+  view.triangles = chunk.triangles.data();
+  return view;
+}
+
+// A full extraction's chunks, kept back to back in large segments (one arena
+// per thread) instead of five vectors each: tens of MB of fresh memory,
+// advised as huge pages, so that first touching it costs one page fault per
+// 2 MB instead of one per 4 KB. Only the shared vertices' names are kept.
+class ChunkArena {
+ public:
+  ChunkView keep(const MeshChunk& chunk) {
+    ChunkView view = viewOf(chunk);
+    sharedVertices(chunk, shared_);
+    view.vertices = copy(chunk.vertices);
+    view.normals = copy(chunk.normals);
+    view.intensities = copy(chunk.intensities);
+    view.triangles = copy(chunk.triangles);
+    view.shared = copy(shared_);
+    view.shared_count = shared_.size();
+    return view;
+  }
+
+ private:
+  static constexpr std::size_t kSegmentBytes = std::size_t(8) << 20;
+  static constexpr std::size_t kHugePageBytes = std::size_t(2) << 20;
+
+  template <typename T>
+  const T* copy(const std::vector<T>& values) {
+    static_assert(alignof(T) <= alignof(std::max_align_t), "segments are aligned for any scalar");
+    if (values.empty()) return nullptr;
+    const std::size_t bytes = values.size() * sizeof(T);
+    std::size_t offset = (used_ + alignof(T) - 1) & ~(alignof(T) - 1);
+    if (segments_.empty() || offset + bytes > segment_bytes_) {
+      // A chunk is far smaller than a segment (at most ~1 MB for 16^3 blocks).
+      segment_bytes_ = std::max(kSegmentBytes, (bytes + kHugePageBytes - 1) & ~(kHugePageBytes - 1));
+      void* segment = std::aligned_alloc(kHugePageBytes, segment_bytes_);
+      if (!segment) throw std::bad_alloc();
+      segments_.emplace_back(static_cast<char*>(segment));
+      adviseHugePages(segment, segment_bytes_);
+      offset = 0;
+    }
+    T* out = reinterpret_cast<T*>(segments_.back().get() + offset);
+    std::uninitialized_copy(values.begin(), values.end(), out);
+    used_ = offset + bytes;
+    return out;
+  }
+
+  struct Free {
+    void operator()(char* segment) const { std::free(segment); }
+  };
+  std::vector<std::unique_ptr<char, Free>> segments_;
+  std::size_t segment_bytes_ = 0, used_ = 0;
+  std::vector<SharedVertex> shared_;
+};
+
 // weldChunksByName's result on threads: a vertex on a lattice edge can only
 // be shared with the chunks of the (up to 4) blocks whose cubes hold that
 // edge, so the chunk that provides it (the first of them in the given order
 // that cut the edge) is found by looking in those chunks alone; vertices are
-// then numbered by prefix sums, in the serial weld's order.
-TriangleMesh weldChunks(const std::vector<const MeshChunk*>& chunks) {
-  const int edge = chunks.empty() ? 8 : chunks.front()->block_edge;
-  for (const MeshChunk* chunk : chunks)
-    if (chunk->block_edge != edge || (edge != 8 && edge != 16)) return weldChunksByName(chunks);
+// then numbered by prefix sums, in the serial weld's order. Block edges of 8
+// or 16 voxels only.
+TriangleMesh weldViews(const std::vector<ChunkView>& chunks, int edge) {
   const std::size_t count = chunks.size();
   std::vector<std::size_t> first_vertex(count + 1, 0), first_triangle(count + 1, 0);
   bool with_intensity = true, any_intensity = false;
   for (std::size_t c = 0; c < count; ++c) {
-    const MeshChunk& chunk = *chunks[c];
-    if (chunk.vertex_edges.size() != chunk.vertices.size() || chunk.normals.size() != chunk.vertices.size())
-      throw MappingError("marching cubes: chunk " + keyText(chunk.key) +
-                         " has vertices, normals and lattice edges of different counts");
-    first_vertex[c + 1] = first_vertex[c] + chunk.vertices.size();
-    first_triangle[c + 1] = first_triangle[c] + chunk.triangles.size();
-    if (chunk.vertices.empty()) continue;
-    const bool has = chunk.intensities.size() == chunk.vertices.size();
-    any_intensity = any_intensity || has;
-    with_intensity = with_intensity && has;
+    const ChunkView& chunk = chunks[c];
+    first_vertex[c + 1] = first_vertex[c] + chunk.vertex_count;
+    first_triangle[c + 1] = first_triangle[c] + chunk.triangle_count;
+    if (chunk.vertex_count == 0) continue;
+    any_intensity = any_intensity || chunk.with_intensity;
+    with_intensity = with_intensity && chunk.with_intensity;
   }
   with_intensity = with_intensity && any_intensity;
   tsl::robin_map<BlockKey, uint32_t, BlockKeyHash> position_of;
   position_of.reserve(count);
-  for (std::size_t c = 0; c < count; ++c) position_of.emplace(chunks[c]->key, uint32_t(c));
+  for (std::size_t c = 0; c < count; ++c) position_of.emplace(chunks[c].key, uint32_t(c));
 
-  // Per chunk, its vertices other chunks may share, sorted by name.
-  std::vector<std::vector<std::pair<LatticeEdge, int>>> shared(count);
   // Per chunk vertex: its index in the mesh, or (until resolved) -1 - the
   // flat index of the providing chunk's vertex.
-  std::vector<int64_t> remap(first_vertex[count]);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 16), [&](const tbb::blocked_range<std::size_t>& range) {
-    for (std::size_t c = range.begin(); c != range.end(); ++c) {
-      const MeshChunk& chunk = *chunks[c];
-      for (std::size_t v = 0; v < chunk.vertices.size(); ++v)
-        if (mayBeShared(chunk, chunk.vertex_edges[v])) shared[c].emplace_back(chunk.vertex_edges[v], int(v));
-      std::sort(shared[c].begin(), shared[c].end(), [](const auto& a, const auto& b) { return nameLess(a.first, b.first); });
-    }
-  });
+  std::vector<int64_t> remap;
+  resizeOnHugePages(remap, first_vertex[count]);
   const int bits = edge == 8 ? 3 : 4, mask = edge - 1;
   std::vector<std::size_t> provided(count, 0);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 16), [&](const tbb::blocked_range<std::size_t>& range) {
     for (std::size_t c = range.begin(); c != range.end(); ++c) {
-      const MeshChunk& chunk = *chunks[c];
-      std::size_t next = first_vertex[c];
-      for (std::size_t v = 0; v < chunk.vertices.size(); ++v) {
-        const LatticeEdge& name = chunk.vertex_edges[v];
-        std::size_t provider = c, provider_vertex = v;
-        if (mayBeShared(chunk, name)) {
-          // The cubes around the edge lie in its block and, across each
-          // other axis where the edge is on the block's lower face, the
-          // block below.
-          const int axis = name.index % 3, voxel = name.index / 3;
-          const int lower[3] = {voxel & mask, (voxel >> bits) & mask, voxel >> (2 * bits)};
-          int on_lower_face = 0;
-          for (int other = 0; other < 3; ++other)
-            if (other != axis && lower[other] == 0) on_lower_face |= 1 << other;
-          for (int below = on_lower_face;; below = (below - 1) & on_lower_face) {
-            const BlockKey key = name.block - Eigen::Vector3i(below & 1, (below >> 1) & 1, below >> 2);
-            const auto found = position_of.find(key);
-            if (found != position_of.end() && found->second < provider) {
-              const auto& candidates = shared[found->second];
-              const auto match = std::lower_bound(candidates.begin(), candidates.end(), name,
-                                                  [](const auto& a, const LatticeEdge& b) { return nameLess(a.first, b); });
-              if (match != candidates.end() && match->first == name) {
-                provider = found->second;
-                provider_vertex = std::size_t(match->second);
-              }
+      const ChunkView& chunk = chunks[c];
+      int64_t* const own = remap.data() + first_vertex[c];
+      std::fill(own, own + chunk.vertex_count, 0);  // provided by the chunk itself unless found below
+      for (std::size_t s = 0; s < chunk.shared_count; ++s) {
+        const LatticeEdge& name = chunk.shared[s].first;
+        std::size_t provider = c, provider_vertex = 0;
+        // The cubes around the edge lie in its block and, across each
+        // other axis where the edge is on the block's lower face, the
+        // block below.
+        const int axis = name.index % 3, voxel = name.index / 3;
+        const int lower[3] = {voxel & mask, (voxel >> bits) & mask, voxel >> (2 * bits)};
+        int on_lower_face = 0;
+        for (int other = 0; other < 3; ++other)
+          if (other != axis && lower[other] == 0) on_lower_face |= 1 << other;
+        for (int below = on_lower_face;; below = (below - 1) & on_lower_face) {
+          const BlockKey key = name.block - Eigen::Vector3i(below & 1, (below >> 1) & 1, below >> 2);
+          const auto found = position_of.find(key);
+          if (found != position_of.end() && found->second < provider) {
+            const ChunkView& other = chunks[found->second];
+            const SharedVertex* const candidates_end = other.shared + other.shared_count;
+            const SharedVertex* const match = std::lower_bound(
+                other.shared, candidates_end, name, [](const SharedVertex& a, const LatticeEdge& b) { return nameLess(a.first, b); });
+            if (match != candidates_end && match->first == name) {
+              provider = found->second;
+              provider_vertex = std::size_t(match->second);
             }
-            if (below == 0) break;
           }
+          if (below == 0) break;
         }
-        remap[first_vertex[c] + v] = provider == c ? int64_t(next++) : -1 - int64_t(first_vertex[provider] + provider_vertex);
+        if (provider != c) own[chunk.shared[s].second] = -1 - int64_t(first_vertex[provider] + provider_vertex);
       }
+      std::size_t next = first_vertex[c];
+      for (std::size_t v = 0; v < chunk.vertex_count; ++v)
+        if (own[v] >= 0) own[v] = int64_t(next++);
       provided[c] = next - first_vertex[c];
     }
   });
@@ -612,15 +705,15 @@ TriangleMesh weldChunks(const std::vector<const MeshChunk*>& chunks) {
   std::vector<std::size_t> first_provided(count + 1, 0);
   for (std::size_t c = 0; c < count; ++c) first_provided[c + 1] = first_provided[c] + provided[c];
   TriangleMesh mesh;
-  mesh.vertices.resize(first_provided[count]);
-  mesh.normals.resize(first_provided[count]);
-  if (with_intensity) mesh.intensities.resize(first_provided[count]);
-  mesh.triangles.resize(first_triangle[count]);
+  resizeOnHugePages(mesh.vertices, first_provided[count]);
+  resizeOnHugePages(mesh.normals, first_provided[count]);
+  if (with_intensity) resizeOnHugePages(mesh.intensities, first_provided[count]);
+  resizeOnHugePages(mesh.triangles, first_triangle[count]);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 16), [&](const tbb::blocked_range<std::size_t>& range) {
     for (std::size_t c = range.begin(); c != range.end(); ++c) {
-      const MeshChunk& chunk = *chunks[c];
+      const ChunkView& chunk = chunks[c];
       const int64_t shift = int64_t(first_provided[c]) - int64_t(first_vertex[c]);
-      for (std::size_t v = 0; v < chunk.vertices.size(); ++v) {
+      for (std::size_t v = 0; v < chunk.vertex_count; ++v) {
         int64_t& index = remap[first_vertex[c] + v];
         if (index < 0) continue;
         index += shift;
@@ -632,17 +725,52 @@ TriangleMesh weldChunks(const std::vector<const MeshChunk*>& chunks) {
   });
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 16), [&](const tbb::blocked_range<std::size_t>& range) {
     for (std::size_t c = range.begin(); c != range.end(); ++c) {
-      const MeshChunk& chunk = *chunks[c];
+      const ChunkView& chunk = chunks[c];
       const auto index = [&](int v) {
         const int64_t own = remap[first_vertex[c] + std::size_t(v)];
         return int(own >= 0 ? own : remap[std::size_t(-1 - own)]);  // a provider's entry is never negative
       };
       Eigen::Vector3i* out = mesh.triangles.data() + first_triangle[c];
-      for (const Eigen::Vector3i& triangle : chunk.triangles)
+      for (std::size_t t = 0; t < chunk.triangle_count; ++t) {
+        const Eigen::Vector3i& triangle = chunk.triangles[t];
         *out++ = Eigen::Vector3i(index(triangle[0]), index(triangle[1]), index(triangle[2]));
+      }
     }
   });
   return mesh;
+}
+
+// The parallel weld (weldViews) where every chunk's block edge is 8 or 16
+// voxels, the serial one by name otherwise.
+TriangleMesh weldChunks(const std::vector<const MeshChunk*>& chunks) {
+  const int edge = chunks.empty() ? 8 : chunks.front()->block_edge;
+  for (const MeshChunk* chunk : chunks)
+    if (chunk->block_edge != edge || (edge != 8 && edge != 16)) return weldChunksByName(chunks);
+  std::vector<ChunkView> views;
+  views.reserve(chunks.size());
+  for (const MeshChunk* chunk : chunks) views.push_back(viewOf(*chunk));
+  // The shared vertices of all chunks in one array: chunk c's from first_shared[c].
+  std::vector<std::size_t> first_shared(chunks.size() + 1, 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks.size(), 16), [&](const tbb::blocked_range<std::size_t>& range) {
+    for (std::size_t c = range.begin(); c != range.end(); ++c) {
+      const MeshChunk& chunk = *chunks[c];
+      for (const LatticeEdge& name : chunk.vertex_edges) first_shared[c + 1] += mayBeShared(chunk.key, edge, name);
+    }
+  });
+  for (std::size_t c = 0; c < chunks.size(); ++c) first_shared[c + 1] += first_shared[c];
+  std::vector<SharedVertex> shared;
+  resizeOnHugePages(shared, first_shared[chunks.size()]);
+  tbb::enumerable_thread_specific<std::vector<SharedVertex>> scratch;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks.size(), 16), [&](const tbb::blocked_range<std::size_t>& range) {
+    std::vector<SharedVertex>& sorted = scratch.local();
+    for (std::size_t c = range.begin(); c != range.end(); ++c) {
+      sharedVertices(*chunks[c], sorted);
+      std::copy(sorted.begin(), sorted.end(), shared.begin() + std::ptrdiff_t(first_shared[c]));
+      views[c].shared = shared.data() + first_shared[c];
+      views[c].shared_count = sorted.size();
+    }
+  });
+  return weldViews(views, edge);
 }
 
 double secondsSince(std::chrono::steady_clock::time_point start) {
@@ -671,18 +799,20 @@ TriangleMesh extractMesh(const VoxelBlockGrid& grid, const MeshOptions& options)
   std::vector<const VoxelBlock*> blocks = grid.blocks();
   std::sort(blocks.begin(), blocks.end(),
             [](const VoxelBlock* a, const VoxelBlock* b) { return keyLess(a->key, b->key); });
-  std::vector<MeshChunk> chunks(blocks.size());
-  tbb::enumerable_thread_specific<BlockMesher> meshers;
+  std::vector<ChunkView> chunks;
+  resizeOnHugePages(chunks, blocks.size());
+  struct Worker {
+    BlockMesher mesher;
+    ChunkArena arena;
+  };
+  tbb::enumerable_thread_specific<Worker> workers;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 4),
                     [&](const tbb::blocked_range<std::size_t>& range) {
-                      BlockMesher& mesher = meshers.local();
+                      Worker& worker = workers.local();
                       for (std::size_t i = range.begin(); i != range.end(); ++i)
-                        chunks[i] = mesher.mesh(grid, *blocks[i], options);
+                        chunks[i] = worker.arena.keep(worker.mesher.build(grid, *blocks[i], options));
                     });
-  std::vector<const MeshChunk*> pointers;
-  pointers.reserve(chunks.size());
-  for (const MeshChunk& chunk : chunks) pointers.push_back(&chunk);
-  return weldChunks(pointers);
+  return weldViews(chunks, grid.blockEdge());
 }
 
 std::size_t countBoundaryEdges(const std::vector<Eigen::Vector3i>& triangles) {
