@@ -48,6 +48,19 @@ void keepSmallest(uint32_t& slot, uint32_t value) {
   }
 }
 
+// render's pass 1 per chunk of points: the moved points as x, y, z arrays
+// and their pixels, left uninitialised (a ProjectedPixel array would be
+// zeroed first; projectMany writes every entry that is read).
+constexpr std::size_t kRenderChunk = 2048;
+struct ChunkBuffers {
+  alignas(32) float x[kRenderChunk], y[kRenderChunk], z[kRenderChunk];
+  union {
+    ProjectedPixel pixels[kRenderChunk];
+  };
+  uint8_t hits[kRenderChunk];
+  ChunkBuffers() {}
+};
+
 }  // namespace
 
 LocalModel::LocalModel(LocalModelOptions options) : options_(options) {
@@ -364,7 +377,7 @@ void LocalModel::render(const LidarModel& model, const Eigen::Isometry3d& odom_f
   for (std::size_t k = 0; k < keyframes_.size(); ++k)
     view_from_keyframe_[k] = (view_from_odom * keyframes_[keyframes_.size() - 1 - k].odom_from_lidar).cast<float>();
   const auto keyframe = [&](std::size_t k) -> const Keyframe& { return keyframes_[keyframes_.size() - 1 - k]; };
-  constexpr std::size_t kChunk = 2048;
+  constexpr std::size_t kChunk = kRenderChunk;
   for (std::size_t l = 0; l < level_count; ++l) {
     const int s = keyframes_.back().levels[l].stride;
     VertexNormalMap& level = levels[l];
@@ -389,38 +402,39 @@ void LocalModel::render(const LidarModel& model, const Eigen::Isometry3d& odom_f
     for (std::size_t k = 0; k < keyframes_.size(); ++k) level_points_[k] = &keyframe(k).levels[l];
 
     // Pass 1: every point's pixel and range, and each pixel's nearest range.
+    // Points without a normal take part in the z-buffer (they occlude) but
+    // cannot win a pixel: they get no pixel for pass 2.
     for (std::size_t k = 0; k < keyframes_.size(); ++k) {
       const Level& points = keyframe(k).levels[l];
       const Eigen::Isometry3f& view_from_keyframe = view_from_keyframe_[k];
       const std::size_t first = first_point_[k];
       tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.points.size(), kChunk),
                         [&](const tbb::blocked_range<std::size_t>& block) {
-                          Eigen::Vector3f moved[kChunk];
-                          ProjectedPixel pixels[kChunk];
-                          uint8_t hits[kChunk];
+                          ChunkBuffers chunk;
                           const std::size_t n = block.size();
-                          for (std::size_t i = 0; i < n; ++i) moved[i] = view_from_keyframe * points.points[block.begin() + i];
-                          model.projectMany(moved, n, pixels, hits);
+                          if (n == 0) return;  // never; tells the compiler the arrays are set before projectMany
+                          const Eigen::Vector3f* in = points.points.data() + block.begin();
+                          for (std::size_t i = 0; i < n; ++i) {
+                            const Eigen::Vector3f moved = view_from_keyframe * in[i];
+                            chunk.x[i] = moved.x();
+                            chunk.y[i] = moved.y();
+                            chunk.z[i] = moved.z();
+                          }
+                          model.projectMany(chunk.x, chunk.y, chunk.z, n, chunk.pixels, chunk.hits);
                           for (std::size_t i = 0; i < n; ++i) {
                             const std::size_t number = first + block.begin() + i;
-                            if (!hits[i]) {
+                            if (!chunk.hits[i]) {
                               pixel_of_point_[number] = kNoPoint;
                               continue;
                             }
-                            const uint32_t pixel = uint32_t(pixel_tables_.index(pixels[i]));
-                            pixel_of_point_[number] = pixel;
-                            range_of_point_[number] = pixels[i].range;
-                            keepSmallest(nearest[pixel], rangeBits(pixels[i].range));
+                            const uint32_t pixel = uint32_t(pixel_tables_.index(chunk.pixels[i]));
+                            const bool has_normal = std::isfinite(points.normals[block.begin() + i].x());
+                            pixel_of_point_[number] = has_normal ? pixel : kNoPoint;
+                            range_of_point_[number] = chunk.pixels[i].range;
+                            keepSmallest(nearest[pixel], rangeBits(chunk.pixels[i].range));
                           }
                         });
     }
-    // Points without a normal take part in the z-buffer (they occlude) but
-    // cannot win a pixel.
-    const auto has_normal = [&](std::size_t number) {
-      std::size_t k = 0;
-      while (number >= first_point_[k + 1]) ++k;
-      return std::isfinite(level_points_[k]->normals[number - first_point_[k]].x());
-    };
     // Pass 2: of the points on the nearest surface, the newest keyframe's.
     // The nearest point itself would be biased towards the sensor by the
     // noise: the least of several noisy ranges of one surface.
@@ -428,7 +442,7 @@ void LocalModel::render(const LidarModel& model, const Eigen::Isometry3d& odom_f
                       [&](const tbb::blocked_range<std::size_t>& block) {
                         for (std::size_t number = block.begin(); number < block.end(); ++number) {
                           const uint32_t pixel = pixel_of_point_[number];
-                          if (pixel == kNoPoint || !has_normal(number)) continue;
+                          if (pixel == kNoPoint) continue;
                           const float range = range_of_point_[number];
                           float front;
                           const uint32_t bits = __atomic_load_n(&nearest[pixel], __ATOMIC_RELAXED);
