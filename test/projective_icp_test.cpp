@@ -66,13 +66,25 @@ Eigen::Isometry3d routePose(const simulation::Scene& scene, double height) {
   return pose;
 }
 
+// A generated scene of seed 7 and a ray caster over it, for the simulated
+// pairs below.
+struct GeneratedScene {
+  explicit GeneratedScene(simulation::SceneKind kind) : scene(generate(kind)), caster(scene.mesh) {}
+  static simulation::Scene generate(simulation::SceneKind kind) {
+    simulation::SceneOptions options;
+    options.kind = kind;
+    options.seed = 7;
+    return simulation::generateScene(options);
+  }
+  const simulation::Scene scene;
+  const simulation::RayCaster caster;
+};
+
 TEST_P(SimulatedRegistration, RecoversTheRelativePoseFromIdentity) {
   const SimulatedPair& pair = GetParam();
-  simulation::SceneOptions scene_options;
-  scene_options.kind = pair.kind;
-  scene_options.seed = 7;
-  const simulation::Scene scene = simulation::generateScene(scene_options);
-  const simulation::RayCaster caster(scene.mesh);
+  const GeneratedScene generated(pair.kind);
+  const simulation::Scene& scene = generated.scene;
+  const simulation::RayCaster& caster = generated.caster;
   simulation::SensorEffects effects;
   effects.motion_distortion = false;
   effects.range_noise_sigma_m = pair.noise_sigma_m;
@@ -255,19 +267,15 @@ TEST(AreaWeight, CapFollowsTheTargetSensorsRowSpacing) {
 // towards no rotation (about 0.7 of each step followed). With normals that
 // must lie in line with their neighbours the steps are followed whole.
 TEST(SparseRows, RegistrationFollowsRollAndPitchSteps) {
-  simulation::SceneOptions scene_options;
-  scene_options.kind = simulation::SceneKind::kOutdoor;
-  scene_options.seed = 7;
-  const simulation::Scene scene = simulation::generateScene(scene_options);
-  const simulation::RayCaster caster(scene.mesh);
+  const GeneratedScene street(simulation::SceneKind::kOutdoor);
   simulation::SensorEffects effects;
   effects.motion_distortion = false;
   effects.range_noise_sigma_m = 0.01;
   const LidarModelConstPtr model = std::make_shared<const LidarModel>(*catalogSensor("VLP-16"));
   ASSERT_TRUE(sparseRows(*model));
   ASSERT_FALSE(sparseRows(*ousterLikeModel("OS-1-128")));
-  const simulation::LidarSimulator simulator(model, caster, effects, 5);
-  const Eigen::Isometry3d first = routePose(scene, 1.8);
+  const simulation::LidarSimulator simulator(model, street.caster, effects, 5);
+  const Eigen::Isometry3d first = routePose(street.scene, 1.8);
   const simulation::SimulatedScan target =
       simulator.simulate(simulation::InterpolatedTrajectory({0.0, 1.0}, {first, first}), 0.0, 0);
 
@@ -369,11 +377,9 @@ TEST(DegenerateRegistration, BadInputThrowsClearErrors) {
 // gate 3 m already fails (3.1 m error); the paper's {4, 2, 1} with it
 // reaches 7 m but not 9 m (3.2 m error), {16, 8, 4, 2, 1} reaches 9 m.
 TEST(WideCapture, RecoversMetresOfMotionFromIdentity) {
-  simulation::SceneOptions scene_options;
-  scene_options.kind = simulation::SceneKind::kOutdoor;
-  scene_options.seed = 7;
-  const simulation::Scene scene = simulation::generateScene(scene_options);
-  const simulation::RayCaster caster(scene.mesh);
+  const GeneratedScene generated(simulation::SceneKind::kOutdoor);
+  const simulation::Scene& scene = generated.scene;
+  const simulation::RayCaster& caster = generated.caster;
   simulation::SensorEffects effects;
   effects.motion_distortion = false;
   const simulation::LidarSimulator simulator(ousterLikeModel("OS-1-128"), caster, effects, 3);
@@ -408,11 +414,9 @@ TEST(WideCapture, RecoversMetresOfMotionFromIdentity) {
 // the sweep) registered with its columns moved by the true motion: the same
 // pose as registering a deskewed copy, and far better than ignoring it.
 TEST(ColumnMotion, DeskewInsideTheRegistrationRecoversAMovingScan) {
-  simulation::SceneOptions scene_options;
-  scene_options.kind = simulation::SceneKind::kOutdoor;
-  scene_options.seed = 7;
-  const simulation::Scene scene = simulation::generateScene(scene_options);
-  const simulation::RayCaster caster(scene.mesh);
+  const GeneratedScene generated(simulation::SceneKind::kOutdoor);
+  const simulation::Scene& scene = generated.scene;
+  const simulation::RayCaster& caster = generated.caster;
   const simulation::LidarSimulator simulator(ousterLikeModel("OS-1-128"), caster, simulation::SensorEffects{}, 3);
   const Eigen::Isometry3d first = routePose(scene, 1.8);
   const simulation::SimulatedScan target =
