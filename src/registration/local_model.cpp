@@ -1,5 +1,7 @@
 #include "range_image_mapping/registration/local_model.h"
 
+#include "range_image_mapping/registration/projective_icp.h"
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -30,8 +32,8 @@ constexpr float kSurfaceThicknessShare = 0.01f;
 // keyframe. Measured (issue 14): a VLP-16 (2 deg) drifts least with
 // keyframes about 2 m apart, the HDL-32E (1.33 deg) at 1.33 m (at 0.89 m its
 // RPE got worse); the OS-0-128 (0.7 deg) lost 0.3 mm ATE indoors at 0.72 m,
-// so sensors with rows under a degree apart keep the option's distance.
-constexpr double kSparseRowSpacing_rad = M_PI / 180.0;
+// so sensors with rows under a degree apart (not sparseRows) keep the
+// option's distance.
 constexpr double kKeyframeDistancePerSpacing_m_rad = 180.0 / M_PI;  // a metre per degree
 
 // Positive floats order as their bit patterns.
@@ -84,9 +86,9 @@ Eigen::Isometry3d LocalModel::newestPose() const {
 
 double keyframeDistance(const LocalModelOptions& options, const LidarModel& model) {
   if (!(options.keyframe_distance_m > 0.0)) return 0.0;
-  const double d = model.intrinsics().medianRowSpacingRad();
-  if (d < kSparseRowSpacing_rad) return options.keyframe_distance_m;
-  return std::max(options.keyframe_distance_m, kKeyframeDistancePerSpacing_m_rad * d);
+  if (!sparseRows(model)) return options.keyframe_distance_m;
+  return std::max(options.keyframe_distance_m,
+                  kKeyframeDistancePerSpacing_m_rad * model.intrinsics().medianRowSpacingRad());
 }
 
 double LocalModel::keyframeDistance(const LidarModel& model) const {

@@ -149,7 +149,6 @@ void crossProductNormalsOfRow(const LevelNeighbourhood& level, int row, Eigen::V
     };
     // In-line rows: the nearest rows with a return on both sides (the next
     // ones out where both are empty), whatever their ranges.
-    bool rows_in_line = false;
     if (in_line) {
       const auto point = [&](const Row& at) -> const Eigen::Vector3f* {
         if (!at.ranges) return nullptr;
@@ -162,8 +161,7 @@ void crossProductNormalsOfRow(const LevelNeighbourhood& level, int row, Eigen::V
         down = point(below2);
         up = point(above2);
       }
-      rows_in_line = onChord(down, up);
-      if (!rows_in_line) {
+      if (!onChord(down, up)) {
         normals[column] = kInvalid;
         continue;
       }
@@ -172,9 +170,9 @@ void crossProductNormalsOfRow(const LevelNeighbourhood& level, int row, Eigen::V
     if (!neighbour(centre_row, column + 1, right) || !neighbour(centre_row, column - 1, left) ||
         !farNeighbours(centre_row, column + 2, centre_row, column - 2, right, left) ||
         !tangentOf(right, left, along_row) ||
-        (!rows_in_line && (!neighbour(below, column, down) || !neighbour(above, column, up) ||
-                           !farNeighbours(below2, column, above2, column, down, up) ||
-                           !tangentOf(down, up, along_column))) ||
+        (!in_line && (!neighbour(below, column, down) || !neighbour(above, column, up) ||
+                      !farNeighbours(below2, column, above2, column, down, up) ||
+                      !tangentOf(down, up, along_column))) ||
         (in_line && !onChord(right, left))) {
       normals[column] = kInvalid;
       continue;
