@@ -110,7 +110,14 @@ run_tests() {
   # One runner for everything: gtests, rostests and the fuzzer runs are ctest tests,
   # two at a time (the tests that keep both cores busy claim both: CMakeLists.txt).
   echo "== tests"
-  cd "$workspace/build" && ctest -j2 --output-on-failure
+  cd "$workspace/build"
+  local started
+  started=$(date +%s)
+  if ! ctest -j2 --output-on-failure; then
+    # The reasons last, where a log's tail shows them.
+    /usr/bin/python3 "$repository/scripts/test_failures.py" test_results --since "$started"
+    return 1
+  fi
 }
 
 install_dependencies

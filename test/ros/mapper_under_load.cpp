@@ -11,6 +11,7 @@
 #include <gtest/gtest.h>
 #include <nav_msgs/Odometry.h>
 #include <ros/ros.h>
+#include <std_srvs/SetBool.h>
 
 #include <signal.h>
 #include <sys/prctl.h>
@@ -78,10 +79,12 @@ TEST(MapperUnderLoad, EveryScanReachesTheOdometryAndTheMap) {
       "/odometry", 1000,
       [&](const nav_msgs::Odometry::ConstPtr& message) { odometry_stamps.insert(message->header.stamp.toSec()); });
   MapperStatus mapper;
+  std::set<std::string> reporting;  // hardware ids on /diagnostics
   double deferred = 0.0;
   ros::Subscriber diagnostics_subscriber = node.subscribe<diagnostic_msgs::DiagnosticArray>(
       "/diagnostics", 100, [&](const diagnostic_msgs::DiagnosticArray::ConstPtr& message) {
         for (const diagnostic_msgs::DiagnosticStatus& status : message->status) {
+          reporting.insert(status.hardware_id);
           if (status.hardware_id != "tsdf_mapper") continue;
           ++mapper.messages;
           for (const diagnostic_msgs::KeyValue& entry : status.values) {
@@ -97,8 +100,27 @@ TEST(MapperUnderLoad, EveryScanReachesTheOdometryAndTheMap) {
         }
       });
 
+  // The replay starts paused and this node starts it once the whole chain
+  // listens (every nodelet has reported, this node's /odometry is
+  // connected): a late start on a slow machine would lose the first scans.
+  ASSERT_TRUE(spinUntil(
+      [&] {
+        return reporting.count("lidar_adapter") && reporting.count("lidar_odometry") &&
+               reporting.count("tsdf_mapper") && odometry_subscriber.getNumPublishers() > 0;
+      },
+      120.0))
+      << "the nodelets did not all report within 120 s (adapter " << reporting.count("lidar_adapter")
+      << ", odometry " << reporting.count("lidar_odometry") << ", mapper " << reporting.count("tsdf_mapper")
+      << "), or /odometry has no publisher";
+  const std::string resume_service = "/rosbag_play/pause_playback";
+  ASSERT_TRUE(ros::service::waitForService(resume_service, 120 * 1000)) << resume_service << " never came";
+
   const BusyCore busy;  // from before the replay starts to the end
   ASSERT_TRUE(busy.running());
+  std_srvs::SetBool resume;
+  resume.request.data = false;
+  ASSERT_TRUE(ros::service::call(resume_service, resume) && resume.response.success)
+      << "the replay did not start: " << resume.response.message;
   const bool done = spinUntil(
       [&] {
         return int(odometry_stamps.size()) >= frames && mapper.value("total scans integrated") >= frames;
@@ -107,15 +129,19 @@ TEST(MapperUnderLoad, EveryScanReachesTheOdometryAndTheMap) {
   // The last diagnostics after the replay: nothing more comes in.
   spinUntil([] { return false; }, 3.0);
 
-  std::printf("under load: %zu odometry messages; mapper: %s scans received, %s integrated, %s without pose, %s lost "
-              "before; max scan-to-map latency %.0f ms, max scans waiting for a pose %.0f, mean pose wait up to "
-              "%.1f ms, %.0f mesh updates deferred, mean integration up to %.1f ms, triangles %s (%s shown)\n",
-              odometry_stamps.size(), mapper.last["total scans received"].c_str(),
-              mapper.last["total scans integrated"].c_str(), mapper.last["total scans without pose"].c_str(),
-              mapper.last["total scans lost before the mapper"].c_str(), mapper.peak("max scan-to-map latency (ms)"),
-              mapper.peak("max scans waiting for a pose"), mapper.peak("mean pose wait (ms)"), deferred,
-              mapper.peak("mean integration (ms)"), mapper.last["triangles"].c_str(),
-              mapper.last["triangles shown"].c_str());
+  char summary[1024];
+  std::snprintf(summary, sizeof(summary),
+                "under load: %zu odometry messages; mapper: %s scans received, %s integrated, %s without pose, %s "
+                "lost before; max scan-to-map latency %.0f ms, max scans waiting for a pose %.0f, mean pose wait up "
+                "to %.1f ms, %.0f mesh updates deferred, mean integration up to %.1f ms, triangles %s (%s shown)",
+                odometry_stamps.size(), mapper.last["total scans received"].c_str(),
+                mapper.last["total scans integrated"].c_str(), mapper.last["total scans without pose"].c_str(),
+                mapper.last["total scans lost before the mapper"].c_str(),
+                mapper.peak("max scan-to-map latency (ms)"), mapper.peak("max scans waiting for a pose"),
+                mapper.peak("mean pose wait (ms)"), deferred, mapper.peak("mean integration (ms)"),
+                mapper.last["triangles"].c_str(), mapper.last["triangles shown"].c_str());
+  std::printf("%s\n", summary);
+  SCOPED_TRACE(summary);  // in every failure message below, so a CI log's summary has the figures
   EXPECT_TRUE(done) << "not every scan arrived within " << timeout_s << " s; last warning: "
                     << mapper.last["last warning"];
   EXPECT_EQ(int(odometry_stamps.size()), frames) << "scans posed by the odometry";
