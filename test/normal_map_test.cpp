@@ -242,6 +242,60 @@ TEST(NormalMap, RealScanWithEmptyNeighbourColumnsKeepsItsNormals) {
       << "normals for " << coverage[1].share << " of the points at 4096 columns, " << coverage[0].share << " at 2048";
 }
 
+// Where a pixel's four neighbours all have a return within the allowed jump,
+// its normal is the central differences' cross product, normalised and
+// facing the sensor, with Eigen's arithmetic to the bit (the loop that does
+// most pixels spells it out to vectorise). A real KITTI scan, whose rows
+// share one azimuth (the rows above and below are in the same column), at
+// the three strides the odometry uses.
+TEST(NormalMap, CentralDifferencesAreEigensArithmeticToTheBit) {
+  RIM_REQUIRE_DATA(scan_path, "kitti00/velodyne/000094.bin");
+  const auto model = std::make_shared<const LidarModel>(io::kittiHdl64Intrinsics(2048));
+  const auto azimuth = [&](int row) { return std::atan2(model->direction(0, row).y(), model->direction(0, row).x()); };
+  for (int row = 1; row < model->rows(); ++row)
+    ASSERT_NEAR(azimuth(row), azimuth(0), 1e-6) << "the test reads the rows above and below in the same column";
+  const RangeImage image = projectPointCloud(io::readKittiVelodyne(scan_path), model);
+  const NormalMapOptions options;
+  for (const int stride : {1, 2, 4}) {
+    VertexNormalMap map;
+    computeVertexNormalMap(image, stride, options, map);
+    const ImageView<const float> ranges = image.rangeView(stride);
+    std::size_t checked = 0, mismatched = 0;
+    for (int row = 1; row + 1 < map.rows; ++row) {
+      for (int column = 1; column + 1 < map.columns; ++column) {
+        const float centre_range = ranges(row, column);
+        if (!isValidRange(centre_range)) continue;
+        const float max_jump = options.max_range_jump_ratio * float(stride) * centre_range;
+        const auto usable = [&](int r, int c) {
+          return isValidRange(ranges(r, c)) && std::abs(ranges(r, c) - centre_range) <= max_jump;
+        };
+        if (!usable(row, column + 1) || !usable(row, column - 1) || !usable(row - 1, column) ||
+            !usable(row + 1, column))
+          continue;
+        const auto point = [&](int r, int c) { return map.points[std::size_t(r) * map.columns + c]; };
+        const Eigen::Vector3f along_row = point(row, column + 1) - point(row, column - 1);
+        const Eigen::Vector3f along_column = point(row + 1, column) - point(row - 1, column);
+        const Eigen::Vector3f normal = along_row.cross(along_column);
+        const float norm = normal.norm();
+        Eigen::Vector3f expected = Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN());
+        if (norm > 1e-3f * along_row.norm() * along_column.norm()) {
+          expected = normal / norm;
+          if (expected.dot(point(row, column)) > 0.0f) expected = -expected;
+        }
+        const Eigen::Vector3f& got = map.normals[std::size_t(row) * map.columns + column];
+        const bool same = std::isfinite(expected.x()) ? got == expected : !std::isfinite(got.x());
+        if (!same && ++mismatched <= 3)
+          ADD_FAILURE() << "stride " << stride << ", pixel (" << row << ", " << column << "): "
+                        << got.transpose() << " instead of " << expected.transpose();
+        ++checked;
+      }
+    }
+    std::printf("stride %d: %zu pixels with four usable neighbours, %zu differ\n", stride, checked, mismatched);
+    EXPECT_EQ(mismatched, 0u) << "stride " << stride;
+    EXPECT_GT(checked, std::size_t(map.rows) * map.columns / 4) << "stride " << stride;
+  }
+}
+
 // levelPixelIndex shifts for power-of-two strides and divides otherwise;
 // both must give the nearest level pixel of the plain formula, for every
 // full-resolution pixel, including the last rows (clamped) and the columns

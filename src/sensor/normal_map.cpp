@@ -1,11 +1,15 @@
 #include "range_image_mapping/normal_map.h"
 
+#include "range_image_mapping/lidar_intrinsics.h"
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <Eigen/Eigenvalues>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -70,13 +74,67 @@ Eigen::Vector3f facingSensor(const Eigen::Vector3f& normal, const Eigen::Vector3
   return normal.dot(point) > 0.0f ? Eigen::Vector3f(-normal) : normal;
 }
 
+// The common case of crossProductNormalsOfRow over plain arrays, branch
+// free so that it vectorises: a pixel whose four neighbours (its row's next
+// columns, and the rows above and below at the same azimuth) all have a
+// return within the allowed jump gets the central differences' normal, with
+// the same float operations in the same order as the general path (so the
+// same bits); done[column] says which pixels it did. Columns [first, last)
+// need no wrap; ranges are read every range_step elements, points (xyz
+// triples) are the level's. Cloned for AVX2 (which has no FMA to fuse them).
+RANGE_IMAGE_MAPPING_AVX2_CLONES
+void interiorCrossProducts(const float* centre_ranges, const float* up_ranges, const float* down_ranges,
+                           int range_step, const float* centre_points, const float* up_points,
+                           const float* down_points, int up_shift, int down_shift, int first, int last,
+                           float jump_per_pixel, float* __restrict normals, uint8_t* __restrict done) {
+  for (int column = first; column < last; ++column) {
+    const float centre_range = centre_ranges[std::ptrdiff_t(column) * range_step];
+    const float right_range = centre_ranges[std::ptrdiff_t(column + 1) * range_step];
+    const float left_range = centre_ranges[std::ptrdiff_t(column - 1) * range_step];
+    const float up_range = up_ranges[std::ptrdiff_t(column + up_shift) * range_step];
+    const float down_range = down_ranges[std::ptrdiff_t(column + down_shift) * range_step];
+    const float max_jump = jump_per_pixel * centre_range;
+    // isValidRange and LevelNeighbourhood::classify, as masks (false for NaN).
+    const auto usable = [&](float range) {
+      return int(range > 0.0f) & int(std::abs(range) <= std::numeric_limits<float>::max()) &
+             int(std::abs(range - centre_range) <= max_jump);
+    };
+    const int all = int(centre_range > 0.0f) & int(std::abs(centre_range) <= std::numeric_limits<float>::max()) &
+                    usable(right_range) & usable(left_range) & usable(up_range) & usable(down_range);
+    const float* right = centre_points + 3 * (column + 1);
+    const float* left = centre_points + 3 * (column - 1);
+    const float* up = up_points + 3 * (column + up_shift);
+    const float* down = down_points + 3 * (column + down_shift);
+    const float rx = right[0] - left[0], ry = right[1] - left[1], rz = right[2] - left[2];  // along the row
+    const float cx = down[0] - up[0], cy = down[1] - up[1], cz = down[2] - up[2];           // along the column
+    // Eigen's cross, and its squaredNorm and dot as it sums three terms: x + (y + z).
+    const float nx = ry * cz - rz * cy, ny = rz * cx - rx * cz, nz = rx * cy - ry * cx;
+    const float norm = std::sqrt(nx * nx + (ny * ny + nz * nz));
+    const float row_norm = std::sqrt(rx * rx + (ry * ry + rz * rz));
+    const float column_norm = std::sqrt(cx * cx + (cy * cy + cz * cz));
+    const int reliable = int(norm > 1e-3f * row_norm * column_norm);
+    const float* centre = centre_points + 3 * column;
+    const float ux = nx / norm, uy = ny / norm, uz = nz / norm;
+    const float sign = ux * centre[0] + (uy * centre[1] + uz * centre[2]) > 0.0f ? -1.0f : 1.0f;
+    // Every value computed before the selects, so that they stay selects.
+    const float fx = sign * ux, fy = sign * uy, fz = sign * uz;
+    constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+    float* out = normals + 3 * column;
+    out[0] = reliable ? fx : kNaN;
+    out[1] = reliable ? fy : kNaN;
+    out[2] = reliable ? fz : kNaN;
+    done[column] = uint8_t(all);
+  }
+}
+
 // Cross-product normals of one level row: the tangent along each image axis
 // is the central difference when both neighbours are usable, else the
 // one-sided one; none when neither is usable or a neighbour is across a depth
 // discontinuity (the pixel sits on an edge, where mixed returns and occlusion
 // shadows make the normal unreliable). The row's ranges, points and azimuth
 // shifts are looked up once per row: every scan's normals go through here.
-void crossProductNormalsOfRow(const LevelNeighbourhood& level, int row, Eigen::Vector3f* normals) {
+// done: a row's worth of scratch.
+void crossProductNormalsOfRow(const LevelNeighbourhood& level, int row, Eigen::Vector3f* normals, uint8_t* done) {
   const VertexNormalMap& map = level.map;
   const int columns = map.columns;
   const int range_step = level.ranges.fullColumn(1);  // level column -> element of the full row
@@ -97,7 +155,19 @@ void crossProductNormalsOfRow(const LevelNeighbourhood& level, int row, Eigen::V
     return neighbour;
   };
   const Row centre_row = rowAt(0), above = rowAt(-1), below = rowAt(1), above2 = rowAt(-2), below2 = rowAt(2);
+  // Most pixels first, in the common case's loop; the rest below.
+  std::fill(done, done + columns, uint8_t(0));
+  const bool in_line = level.max_chord_offset_m > 0.0f && map.stride == 1;
+  if (!in_line && above.ranges && below.ranges) {
+    const int first = std::max({1, -above.shift, -below.shift});
+    const int last = std::min({columns - 1, columns - above.shift, columns - below.shift});
+    if (first < last)
+      interiorCrossProducts(centre_row.ranges, above.ranges, below.ranges, range_step, centre_row.points->data(),
+                            above.points->data(), below.points->data(), above.shift, below.shift, first, last,
+                            level.jump_per_pixel, normals->data(), done);
+  }
   for (int column = 0; column < columns; ++column) {
+    if (done[std::size_t(column)]) continue;
     const float centre_range = centre_row.ranges[std::ptrdiff_t(column) * range_step];
     if (!isValidRange(centre_range)) {
       normals[column] = kInvalid;
@@ -130,7 +200,7 @@ void crossProductNormalsOfRow(const LevelNeighbourhood& level, int row, Eigen::V
       return true;
     };
     const Eigen::Vector3f *right, *left, *down, *up;
-    Eigen::Vector3f along_row, along_column;
+    Eigen::Vector3f along_row, along_column = Eigen::Vector3f::Zero();  // (set on every path that reads it)
     // Where both neighbours along an axis are missing, the next ones out: a
     // model with more columns or rows than the sensor fills every scan (an
     // estimated model that keeps the points of beams firing between steps)
@@ -141,7 +211,6 @@ void crossProductNormalsOfRow(const LevelNeighbourhood& level, int row, Eigen::V
       if (after || before) return true;
       return neighbour(after_row, after_column, after, 2) && neighbour(before_row, before_column, before, 2);
     };
-    const bool in_line = level.max_chord_offset_m > 0.0f && map.stride == 1;
     const auto onChord = [&](const Eigen::Vector3f* after, const Eigen::Vector3f* before) {
       if (!after || !before) return false;
       const Eigen::Vector3f chord = *after - *before;
@@ -295,9 +364,10 @@ void computeVertexNormalMap(const RangeImage& image, int stride, const NormalMap
   const LevelNeighbourhood level{out, view, options.max_range_jump_ratio * float(stride), options.max_chord_offset_m,
                                radius, row_shifts};
   tbb::parallel_for(tbb::blocked_range<int>(0, out.rows), [&](const tbb::blocked_range<int>& rows) {
+    std::vector<uint8_t> done(options.method == NormalMethod::kCrossProduct ? std::size_t(out.columns) : 0);
     for (int row = rows.begin(); row != rows.end(); ++row) {
       if (options.method == NormalMethod::kCrossProduct) {
-        crossProductNormalsOfRow(level, row, out.normals.data() + std::size_t(row) * out.columns);
+        crossProductNormalsOfRow(level, row, out.normals.data() + std::size_t(row) * out.columns, done.data());
         continue;
       }
       for (int column = 0; column < out.columns; ++column) {
