@@ -183,11 +183,17 @@ class BlockMesher {
           }
           const MarchingCubesCases::Triangles triangles = cases.triangles(corner_signs, decisions);
           const Eigen::Vector3i cube(x, y, z);
+          // Most cube edges were cut by an earlier cube: a lookup, by the
+          // cube's first local edge plus the cube edge's offset from it.
+          const int cube_local_edge = 3 * (x + (edge + 1) * (y + (edge + 1) * z));
           const auto vertexOnCubeEdge = [&](int cube_edge) {
+            const int local_edge = cube_local_edge + cube_edge_offset_[cube_edge];
+            const int vertex = vertex_of_edge_[local_edge];
+            if (vertex >= 0) return vertex;
             const CubeEdge& edge_of_cube = cases.edges()[cube_edge];
             const int c = edge_of_cube.lower_corner;
-            return vertexOn(grid, block.key, cube + Eigen::Vector3i(c & 1, (c >> 1) & 1, c >> 2),
-                            edge_of_cube.axis, chunk);
+            return newVertex(grid, block.key, cube + Eigen::Vector3i(c & 1, (c >> 1) & 1, c >> 2),
+                             edge_of_cube.axis, local_edge, chunk);
           };
           int interior = -1;
           if (triangles.interior_loop_size > 0) {
@@ -227,6 +233,12 @@ class BlockMesher {
     sdf_.resize(padded_voxels);
     if (with_intensity_) intensity_.resize(padded_voxels);
     vertex_of_edge_.resize(3 * std::size_t(edge_ + 1) * (edge_ + 1) * (edge_ + 1), -1);
+    const MarchingCubesCases& cases = MarchingCubesCases::instance();
+    for (int cube_edge = 0; cube_edge < 12; ++cube_edge) {
+      const int c = cases.edges()[cube_edge].lower_corner;
+      cube_edge_offset_[cube_edge] =
+          cases.edges()[cube_edge].axis + 3 * ((c & 1) + (edge_ + 1) * (((c >> 1) & 1) + (edge_ + 1) * (c >> 2)));
+    }
     const std::size_t lattice_points = std::size_t(edge_ + 1) * (edge_ + 1) * (edge_ + 1);
     if (gradients_.size() != lattice_points) {
       gradients_.assign(lattice_points, Eigen::Vector3f::Zero());
@@ -339,25 +351,17 @@ class BlockMesher {
     return decisions;
   }
 
-  // SDF derivative along one axis at lattice point `point` (padded
-  // coordinates in [0, edge]), in SDF units per voxel. Central where both
-  // neighbours are observed; never reads below a block's lower face, so what
-  // a chunk reads stays within its block and the +1 neighbours and the
-  // value does not depend on which chunk asks.
-  float derivative(const Eigen::Vector3i& point, int axis) const {
-    const int index = paddedIndex(point.x(), point.y(), point.z());
-    const int step = stride_[axis];
-    const bool lower_face = point[axis] == 0 || point[axis] == edge_;
-    const auto observedAt = [&](int offset) {
-      Eigen::Vector3i at = point;
-      at[axis] += offset;
-      return ((observed_bits_[at.y() + padded_ * at.z()] >> at.x()) & 1u) != 0;
-    };
-    const bool minus = !lower_face && observedAt(-1);
-    const bool plus = observedAt(1);
+  // SDF derivative along one axis at a lattice point (padded index `index`),
+  // in SDF units per voxel, from which of its neighbours along the axis are
+  // observed (`minus`: the one below, never read at a block's lower face;
+  // `plus`, `plus2`: one and two above). Central where both neighbours are
+  // observed; never reading below a block's lower face keeps what a chunk
+  // reads within its block and the +1 neighbours, so the value does not
+  // depend on which chunk asks.
+  float derivative(int index, int step, bool minus, bool plus, bool plus2) const {
     if (minus && plus) return 0.5f * (sdf_[index + step] - sdf_[index - step]);
     if (plus) {
-      if (observedAt(2))  // second order, as accurate as the central difference
+      if (plus2)  // second order, as accurate as the central difference
         return 0.5f * (-3.0f * sdf_[index] + 4.0f * sdf_[index + step] - sdf_[index + 2 * step]);
       return sdf_[index + step] - sdf_[index];
     }
@@ -370,19 +374,31 @@ class BlockMesher {
     const int index = point.x() + (edge_ + 1) * (point.y() + (edge_ + 1) * point.z());
     if (gradient_chunk_[index] != chunk_number_) {
       gradient_chunk_[index] = chunk_number_;
-      gradients_[index] = {derivative(point, 0), derivative(point, 1), derivative(point, 2)};
+      const int x = point.x(), row = point.y() + padded_ * point.z();
+      const int padded_index = x + row_ * row;
+      const uint32_t* const observed = observed_bits_.data();
+      const uint32_t here = observed[row];
+      const auto bit = [](uint32_t bits, int at) { return ((bits >> at) & 1u) != 0; };
+      // Along y and z the neighbours are other rows (padded_ rows per z layer).
+      const auto along = [&](int coordinate, int row_step, int step) {
+        const bool minus = coordinate != 0 && coordinate != edge_ && bit(observed[row - row_step], x);
+        return derivative(padded_index, step, minus, bit(observed[row + row_step], x),
+                          bit(observed[row + 2 * row_step], x));
+      };
+      const bool minus_x = x != 0 && x != edge_ && bit(here, x - 1);
+      gradients_[index] = {derivative(padded_index, 1, minus_x, bit(here, x + 1), bit(here, x + 2)),
+                           along(point.y(), 1, stride_[1]), along(point.z(), padded_, stride_[2])};
     }
     return gradients_[index];
   }
 
   // The chunk's vertex on the lattice edge from `lower` (padded coordinates)
-  // along `axis`, created on first use.
-  int vertexOn(const VoxelBlockGrid& grid, const BlockKey& key, const Eigen::Vector3i& lower,
-               int axis, MeshChunk& chunk) {
-    const int local_edge = axis + 3 * (lower.x() + (edge_ + 1) * (lower.y() + (edge_ + 1) * lower.z()));
-    int& vertex = vertex_of_edge_[local_edge];
-    if (vertex >= 0) return vertex;
-    vertex = int(chunk.vertices.size());
+  // along `axis` (local_edge: axis + 3 * lattice index of `lower`), which
+  // has none yet.
+  int newVertex(const VoxelBlockGrid& grid, const BlockKey& key, const Eigen::Vector3i& lower, int axis,
+                int local_edge, MeshChunk& chunk) {
+    const int vertex = int(chunk.vertices.size());
+    vertex_of_edge_[local_edge] = vertex;
     vertex_local_edges_.push_back(local_edge);
 
     const Eigen::Vector3i upper = lower + Eigen::Vector3i::Unit(axis);
@@ -464,6 +480,7 @@ class BlockMesher {
   std::vector<uint32_t> gradient_chunk_;
   uint32_t chunk_number_ = 0;
   std::vector<int> vertex_of_edge_;      // local lattice edge -> vertex of the current chunk
+  std::array<int, 12> cube_edge_offset_{};  // a cube edge's local lattice edge minus the cube's first
   std::vector<int> vertex_local_edges_;  // what to reset after the chunk
   std::vector<int> loop_vertices_;
 };
