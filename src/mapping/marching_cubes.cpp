@@ -25,6 +25,7 @@
 #include <memory>
 #include <new>
 #include <sstream>
+#include <type_traits>
 
 namespace range_image_mapping::mapping {
 namespace {
@@ -77,34 +78,48 @@ inline void voxelRowBits(const float* sdf, const float* weight, int run, float m
   negative = negative_bits;
 }
 
-// One x run of a block (run: the block edge, or 3 for a +1 neighbour across
-// x) copied into the padded arrays, its voxels classified as voxelRowBits
-// does. With SSE2 in whole groups of four: a run of 3 reads one value past
-// its end (still inside the block's arrays, as the run starts a row) and
-// writes one into the padded row's spare slot (BlockMesher::row_).
-inline void loadRun(const float* sdf, const float* weight, const float* intensity, int run, float min_weight,
-                    float* sdf_out, float* intensity_out, uint32_t& observed, uint32_t& negative) {
+// The rows of one block's part of the padded arrays (a block, or the slab of
+// a +1 neighbour): y_count x z_count x runs of kGroups groups of four, each
+// classified as voxelRowBits does, their bits shifted to the rows' first x and
+// or-ed into the row bits, and the observed voxels of either sign gathered
+// in any_negative / any_positive. Whole groups, so no per-row length test:
+// this is most of the instructions spent on a block that has no surface.
+template <int kGroups, bool kIntensity>
+inline void loadRegion(const float* sdf_in, const float* weight_in, const float* intensity_in, int edge,
+                       int y_count, int z_count, int row_floats, int padded, float min_weight, uint32_t in_run,
+                       int shift, float* sdf_out, float* intensity_out, uint32_t* observed_out,
+                       uint32_t* negative_out, uint32_t& any_negative, uint32_t& any_positive) {
+  for (int z = 0; z < z_count; ++z)
+    for (int y = 0; y < y_count; ++y) {
+      const int voxel = edge * (y + edge * z), target = row_floats * (y + padded * z), row = y + padded * z;
+      uint32_t observed_row = 0, negative_row = 0;
 #if defined(__SSE2__)
-  uint32_t observed_bits = 0, negative_bits = 0;
-  const __m128 zero = _mm_setzero_ps(), minimum = _mm_set1_ps(min_weight), largest = _mm_set1_ps(FLT_MAX);
-  const __m128 magnitude = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
-  for (int x = 0; x < run; x += 4) {
-    const __m128 s = _mm_loadu_ps(sdf + x), w = _mm_loadu_ps(weight + x);
-    _mm_storeu_ps(sdf_out + x, s);
-    if (intensity) _mm_storeu_ps(intensity_out + x, _mm_loadu_ps(intensity + x));
-    const __m128 is_observed = _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(w, zero), _mm_cmpge_ps(w, minimum)),
-                                          _mm_cmple_ps(_mm_and_ps(s, magnitude), largest));
-    observed_bits |= uint32_t(_mm_movemask_ps(is_observed)) << x;
-    negative_bits |= uint32_t(_mm_movemask_ps(_mm_cmplt_ps(s, zero))) << x;
-  }
-  const uint32_t in_run = run >= 32 ? ~0u : (1u << run) - 1u;
-  observed = observed_bits & in_run;
-  negative = negative_bits & in_run;
+      const __m128 zero = _mm_setzero_ps(), minimum = _mm_set1_ps(min_weight), largest = _mm_set1_ps(FLT_MAX);
+      const __m128 magnitude = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+      for (int group = 0; group < kGroups; ++group) {
+        const int x = 4 * group;
+        const __m128 s = _mm_loadu_ps(sdf_in + voxel + x), w = _mm_loadu_ps(weight_in + voxel + x);
+        _mm_storeu_ps(sdf_out + target + x, s);
+        if (kIntensity) _mm_storeu_ps(intensity_out + target + x, _mm_loadu_ps(intensity_in + voxel + x));
+        const __m128 is_observed = _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(w, zero), _mm_cmpge_ps(w, minimum)),
+                                              _mm_cmple_ps(_mm_and_ps(s, magnitude), largest));
+        observed_row |= uint32_t(_mm_movemask_ps(is_observed)) << x;
+        negative_row |= uint32_t(_mm_movemask_ps(_mm_cmplt_ps(s, zero))) << x;
+      }
+      observed_row &= in_run;
+      negative_row &= in_run;
 #else
-  voxelRowBits(sdf, weight, run, min_weight, observed, negative);
-  std::copy(sdf, sdf + run, sdf_out);
-  if (intensity) std::copy(intensity, intensity + run, intensity_out);
+      const int run = std::min(4 * kGroups, __builtin_popcount(in_run));
+      voxelRowBits(sdf_in + voxel, weight_in + voxel, run, min_weight, observed_row, negative_row);
+      std::copy(sdf_in + voxel, sdf_in + voxel + run, sdf_out + target);
+      if (kIntensity) std::copy(intensity_in + voxel, intensity_in + voxel + run, intensity_out + target);
 #endif
+      // Observed values are finite: not negative means >= 0.
+      any_negative |= observed_row & negative_row;
+      any_positive |= observed_row & ~negative_row;
+      observed_out[row] |= observed_row << shift;
+      negative_out[row] |= negative_row << shift;
+    }
 }
 
 // Inline: it runs for a block and its 7 neighbours each time a block is meshed.
@@ -261,43 +276,51 @@ class BlockMesher {
     const float min_weight = options.min_weight;
     observed_bits_.assign(std::size_t(padded_) * padded_, 0u);
     negative_bits_.assign(std::size_t(padded_) * padded_, 0u);
-    bool has_negative = false, has_positive = false;
+    uint32_t any_negative = 0, any_positive = 0;
     for (int neighbour = 0; neighbour < 8; ++neighbour) {
       // The block's own voxels are in (neighbour 0 comes first): without an
       // observed one no cube can be meshed; with one sign only, the first
       // layer of the +1 neighbours decides before they are copied.
-      if (neighbour == 1 && !(has_negative && has_positive)) {
-        if (!has_negative && !has_positive) return false;
-        if (!neighboursCrossZero(has_negative ? 1 : 2, min_weight)) return false;
+      if (neighbour == 1 && !(any_negative != 0 && any_positive != 0)) {
+        if (any_negative == 0 && any_positive == 0) return false;
+        if (!neighboursCrossZero(any_negative != 0 ? 1 : 2, min_weight)) return false;
       }
-      const Eigen::Vector3i offset(neighbour & 1, (neighbour >> 1) & 1, neighbour >> 2);
       const VoxelBlock* source = neighbours_[neighbour];
+      if (!source) continue;  // its bits stay 0: unobserved
+      const Eigen::Vector3i offset(neighbour & 1, (neighbour >> 1) & 1, neighbour >> 2);
       const Eigen::Vector3i begin = offset * edge_;
       Eigen::Vector3i end;
       for (int axis = 0; axis < 3; ++axis) end[axis] = offset[axis] == 0 ? edge_ : padded_;
       const int run = end.x() - begin.x();
-      // Raw pointers, one x run at a time: the compiler cannot tell the
-      // stores below from the vectors' own members otherwise.
-      float* const sdf_out = sdf_.data();
-      float* const intensity_out = with_intensity_ ? intensity_.data() : nullptr;
-      const float* const sdf_in = source ? source->sdf.data() : nullptr;
-      const float* const weight_in = source ? source->weight.data() : nullptr;
-      const float* const intensity_in = source && with_intensity_ ? source->intensity.data() : nullptr;
-      for (int z = begin.z(); z < end.z(); ++z)
-        for (int y = begin.y(); y < end.y(); ++y) {
-          const int target = paddedIndex(begin.x(), y, z);
-          if (!source) continue;  // its bits stay 0: unobserved
-          const int voxel = edge_ * ((y - begin.y()) + edge_ * (z - begin.z()));
-          uint32_t observed_row, negative_row;
-          loadRun(sdf_in + voxel, weight_in + voxel, intensity_in ? intensity_in + voxel : nullptr, run, min_weight,
-                  sdf_out + target, intensity_out ? intensity_out + target : nullptr, observed_row, negative_row);
-          // Observed values are finite: not negative means >= 0.
-          has_negative = has_negative || (observed_row & negative_row) != 0;
-          has_positive = has_positive || (observed_row & ~negative_row) != 0;
-          observed_bits_[y + padded_ * z] |= observed_row << begin.x();
-          negative_bits_[y + padded_ * z] |= negative_row << begin.x();
+      const uint32_t in_run = run >= 32 ? ~0u : (1u << run) - 1u;
+      const int first_row = begin.y() + padded_ * begin.z();
+      // Raw pointers: the compiler cannot tell the stores from the vectors' own members otherwise.
+      float* const sdf_out = sdf_.data() + paddedIndex(begin.x(), begin.y(), begin.z());
+      float* const intensity_out =
+          with_intensity_ ? intensity_.data() + paddedIndex(begin.x(), begin.y(), begin.z()) : nullptr;
+      const float* const intensity_in = with_intensity_ ? source->intensity.data() : nullptr;
+      // A run of 3 (a +1 neighbour across x) is one group: it reads one value
+      // past its end (still inside the block's arrays, as the run starts a
+      // row) and writes one into the padded row's spare slot (row_).
+      const auto region = [&](auto groups, auto with_intensity) {
+        loadRegion<decltype(groups)::value, decltype(with_intensity)::value>(
+            source->sdf.data(), source->weight.data(), intensity_in, edge_, end.y() - begin.y(),
+            end.z() - begin.z(), row_, padded_, min_weight, in_run, begin.x(), sdf_out, intensity_out,
+            observed_bits_.data() + first_row, negative_bits_.data() + first_row, any_negative, any_positive);
+      };
+      const auto withGroups = [&](auto with_intensity) {
+        switch ((run + 3) / 4) {  // runs of 3, 8 or 16 (block edges are 8 or 16)
+          case 1: region(std::integral_constant<int, 1>(), with_intensity); break;
+          case 2: region(std::integral_constant<int, 2>(), with_intensity); break;
+          default: region(std::integral_constant<int, 4>(), with_intensity); break;
         }
+      };
+      if (with_intensity_)
+        withGroups(std::true_type());
+      else
+        withGroups(std::false_type());
     }
+    const bool has_negative = any_negative != 0, has_positive = any_positive != 0;
     return has_negative && has_positive;
   }
 
@@ -466,7 +489,7 @@ class BlockMesher {
   }
 
   // padded_: voxels per padded edge; row_: floats per x run in sdf_ and
-  // intensity_ (padded_ rounded up to whole groups of four, see loadRun).
+  // intensity_ (padded_ rounded up to whole groups of four, see load).
   int edge_ = 0, padded_ = 0, row_ = 0;
   std::array<int, 3> stride_{};
   bool with_intensity_ = false;
