@@ -405,8 +405,10 @@ namespace {
 
 // The sensor's motion within a sweep, per column (scan_motion.h).
 struct SweepMotion {
-  const std::vector<ColumnMotion>& inverse;  // scan-time frame -> column-time frame
-  const std::vector<float>& time;            // column time after the scan time, s
+  // Per column (pointers, not vector references: one load less in the
+  // voxel loops, where the compiler does not hoist the vectors' data).
+  const ColumnMotion* inverse;  // scan-time frame -> column-time frame
+  const float* time;            // column time after the scan time, s
   // A pixel measured this close in time to the motion that placed the voxel
   // is close enough (see motionTimeTolerance).
   float tolerance_s;
@@ -839,7 +841,7 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
   const std::size_t voxels = static_cast<std::size_t>(grid.voxelsPerBlock());
   const bool with_intensity = grid.options().store_intensity && scan.intensity.size() == scan.range.size();
   const VoxelUpdate voxel_update{options_.max_weight, adding};
-  const SweepMotion sweep_motion{work.column_motion_inverse, work.column_time, time_tolerance_s};
+  const SweepMotion sweep_motion{work.column_motion_inverse.data(), work.column_time.data(), time_tolerance_s};
   work.voxels_updated.assign(touched_blocks_.size(), 0);
   work.voxels_selected.assign(touched_blocks_.size(), 0);
   work.block_drift.assign(touched_blocks_.size(), 0.0f);
@@ -870,6 +872,10 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, touched_blocks_.size(), 1),
                     [&](const tbb::blocked_range<std::size_t>& range) {
     BlockBuffers& buffers = work.thread_buffers.local();
+    // Copies the compiler keeps in registers (it would reload the captured
+    // originals after every voxel store, which might alias them).
+    const std::size_t image_columns = std::size_t(columns);
+    const float range_low = min_range, range_high = max_range, band = truncation;
     buffers.resize(voxels);
     for (std::size_t ordered = range.begin(); ordered != range.end(); ++ordered) {
       const std::size_t b = work.integration_order[ordered];
@@ -930,11 +936,11 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
       if (!planes) {
         for (std::size_t i = 0; i < count; ++i) {
           if (!hits[i]) continue;
-          const std::size_t p = std::size_t(pixels[i].row) * columns + pixels[i].column;
+          const std::size_t p = std::size_t(pixels[i].row) * image_columns + pixels[i].column;
           const float measured = ranges[p];
-          if (!(measured >= min_range && measured <= max_range)) continue;  // also NaN
+          if (!(measured >= range_low && measured <= range_high)) continue;  // also NaN
           const float along_ray = measured - pixels[i].range;                // eq. 9
-          if (along_ray < -truncation) continue;  // occluded: behind the surface
+          if (along_ray < -band) continue;  // occluded: behind the surface
           write(voxel_index[i], p, along_ray);
         }
       } else {
@@ -946,19 +952,19 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
         const PointPointers feet(buffers.scratch);
         for (std::size_t i = 0; i < count; ++i) {
           if (!hits[i]) continue;
-          const std::size_t p = std::size_t(pixels[i].row) * columns + pixels[i].column;
+          const std::size_t p = std::size_t(pixels[i].row) * image_columns + pixels[i].column;
           const PixelPlane& plane = planes[p];
-          if (!(plane.range >= min_range && plane.range <= max_range)) continue;  // also NaN
+          if (!(plane.range >= range_low && plane.range <= range_high)) continue;  // also NaN
           const float along_ray = plane.range - pixels[i].range;                  // eq. 9
           if (!(std::abs(along_ray) <= plane.reach)) {  // also without a normal (NaN)
-            if (along_ray < -truncation) continue;  // occluded: behind the surface
+            if (along_ray < -band) continue;  // occluded: behind the surface
             write(voxel_index[i], p, along_ray);
             continue;
           }
           const float to_plane = plane.distance(frame_points[i]);
-          if (to_plane < -truncation) continue;  // behind the surface
+          if (to_plane < -band) continue;  // behind the surface
           // Within the pixel's own truncation band the plane is the pixel's surface.
-          if (std::abs(along_ray) <= truncation) {
+          if (std::abs(along_ray) <= band) {
             write(voxel_index[i], p, to_plane);
           } else {
             unverified_voxels[unverified] = uint32_t(i);
@@ -971,14 +977,14 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
           model.projectMany(feet.x, feet.y, feet.z, unverified, foot_pixels, foot_hits);
           for (std::size_t n = 0; n < unverified; ++n) {
             const std::size_t i = unverified_voxels[n];
-            const std::size_t p = std::size_t(pixels[i].row) * columns + pixels[i].column;
+            const std::size_t p = std::size_t(pixels[i].row) * image_columns + pixels[i].column;
             const PixelPlane& plane = planes[p];
             const float to_plane = plane.distance(frame_points[i]);
             // Farther along the ray the plane counts only where the image saw
             // it under the voxel (not past an object's edge, into its shadow),
             // and within plane_fill of that return (not across wide gaps
             // between beam rings).
-            const std::size_t q = std::size_t(foot_pixels[n].row) * columns + foot_pixels[n].column;
+            const std::size_t q = std::size_t(foot_pixels[n].row) * image_columns + foot_pixels[n].column;
             if (foot_hits[n] && std::abs(plane.distance(pixel_points[q])) <= plane_tolerance &&
                 (feet[n] - pixel_points[q]).squaredNorm() <= plane_fill_squared) {
               write(voxel_index[i], p, to_plane);  // (NaN for a pixel without a return fails the test)
