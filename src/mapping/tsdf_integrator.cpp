@@ -305,10 +305,10 @@ struct BlockBuffers {
   PointArrays points, moved, scratch;
   std::vector<ProjectedPixel> pixels;
   std::vector<uint8_t> hits;
-  // Motion refinement: the column whose motion placed each voxel, and the
-  // voxels still to refine, packed for projectMany.
-  std::vector<int> motion_columns;
+  // Motion refinement: the voxels still to refine, packed for projectMany,
+  // and the column whose motion places each.
   std::vector<uint32_t> pending;
+  std::vector<int> motion_columns;
   std::vector<ProjectedPixel> pending_pixels;
   std::vector<uint8_t> pending_hits;
   // The block's selected voxels (those of its activated cells), in order:
@@ -465,6 +465,28 @@ std::vector<int> rowsByAltitude(const LidarIntrinsics& intrinsics) {
   return by_altitude;
 }
 
+// The voxels picked by `voxels` (count of them, points of the scan-time
+// frame) moved into the frames of their columns, columns[n] for voxels[n]:
+// SweepMotion::toColumnFrame on plain floats, rounded as Eigen's
+// `rotation * point + translation` (its 3-term sums associate to the right,
+// the translation added last), so the coordinates are the same.
+RANGE_IMAGE_MAPPING_AVX2_CLONES
+void moveIntoColumnFrames(const ColumnMotion* inverse, const int* __restrict columns,
+                          const uint32_t* __restrict voxels, const float* __restrict x_all,
+                          const float* __restrict y_all, const float* __restrict z_all, std::size_t count,
+                          float* __restrict x, float* __restrict y, float* __restrict z) {
+  static_assert(sizeof(ColumnMotion) == 12 * sizeof(float), "column-major 3 x 4, unpadded");
+  const float* __restrict motion = inverse[0].data();
+  for (std::size_t n = 0; n < count; ++n) {  // vectorised
+    const float* m = motion + 12 * std::size_t(columns[n]);
+    const uint32_t i = voxels[n];
+    const float px = x_all[i], py = y_all[i], pz = z_all[i];
+    x[n] = (m[0] * px + (m[3] * py + m[6] * pz)) + m[9];
+    y[n] = (m[1] * px + (m[4] * py + m[7] * pz)) + m[10];
+    z[n] = (m[2] * px + (m[5] * py + m[8] * pz)) + m[11];
+  }
+}
+
 // Pi of a block's voxels into the moving sensor: each voxel as the sensor
 // saw it when the column that measured it fired (the fixed point above, for
 // every voxel). All voxels are first projected as the block centre's column
@@ -511,11 +533,9 @@ void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion,
   ProjectedPixel* pending_pixels = buffers.pending_pixels.data();
   uint8_t* pending_hits = buffers.pending_hits.data();
   for (int pass = 0; pass < kMotionRefinements && pending > 0; ++pass) {
-    for (std::size_t n = 0; n < pending; ++n) {
-      const uint32_t i = pending_voxels[n];
-      motion_columns[i] = pixels[i].column;
-      scratch.set(n, motion.toColumnFrame(motion_columns[i], points[i]));
-    }
+    for (std::size_t n = 0; n < pending; ++n) motion_columns[n] = pixels[pending_voxels[n]].column;
+    moveIntoColumnFrames(motion.inverse, motion_columns, pending_voxels, points.x, points.y, points.z, pending,
+                         scratch.x, scratch.y, scratch.z);
     model.projectMany(scratch.x, scratch.y, scratch.z, pending, pending_pixels, pending_hits);
     std::size_t unsettled = 0;
     for (std::size_t n = 0; n < pending; ++n) {
@@ -526,7 +546,7 @@ void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion,
       moved.x[i] = scratch.x[n];
       moved.y[i] = scratch.y[n];
       moved.z[i] = scratch.z[n];
-      if (!motion.settled(motion_columns[i], pixels[i].column)) pending_voxels[unsettled++] = i;
+      if (!motion.settled(motion_columns[n], pixels[i].column)) pending_voxels[unsettled++] = i;
     }
     pending = unsettled;
   }
