@@ -512,6 +512,9 @@ void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion,
   uint8_t* hits = buffers.hits.data();
   uint32_t* pending_voxels = buffers.pending.data();
   int* motion_columns = buffers.motion_columns.data();
+  // A copy the compiler keeps in registers for the settle checks (the byte
+  // stores to hits below might alias the original).
+  const SweepMotion local_motion = motion;
   std::size_t pending = 0;
   if (centre_column >= 0) {
     // The block's lattice in the centre column's frame.
@@ -523,7 +526,7 @@ void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion,
       // A miss here is a voxel off the vertical field of view by more than
       // the sensor moved between the two columns: it is left out.
       if (!hits[i]) continue;
-      if (!motion.settled(centre_column, pixels[i].column)) pending_voxels[pending++] = uint32_t(i);
+      if (!local_motion.settled(centre_column, pixels[i].column)) pending_voxels[pending++] = uint32_t(i);
     }
   } else {  // the centre is outside the field of view: start from the scan-time projection
     model.projectMany(points.x, points.y, points.z, count, pixels, hits);
@@ -537,16 +540,22 @@ void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion,
     moveIntoColumnFrames(motion.inverse, motion_columns, pending_voxels, points.x, points.y, points.z, pending,
                          scratch.x, scratch.y, scratch.z);
     model.projectMany(scratch.x, scratch.y, scratch.z, pending, pending_pixels, pending_hits);
-    std::size_t unsettled = 0;
     for (std::size_t n = 0; n < pending; ++n) {
       const uint32_t i = pending_voxels[n];
       hits[i] = pending_hits[n];
-      if (!hits[i]) continue;
+      if (!pending_hits[n]) continue;
       pixels[i] = pending_pixels[n];
       moved.x[i] = scratch.x[n];
       moved.y[i] = scratch.y[n];
       moved.z[i] = scratch.z[n];
-      if (!motion.settled(motion_columns[n], pixels[i].column)) pending_voxels[unsettled++] = i;
+    }
+    // Then the voxels still unsettled, packed in place (a separate pass: fewer
+    // pointers live at once).
+    std::size_t unsettled = 0;
+    for (std::size_t n = 0; n < pending; ++n) {
+      if (!pending_hits[n]) continue;
+      if (!local_motion.settled(motion_columns[n], pending_pixels[n].column))
+        pending_voxels[unsettled++] = pending_voxels[n];
     }
     pending = unsettled;
   }
