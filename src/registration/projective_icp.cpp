@@ -73,34 +73,48 @@ void chunkSums(const float (*rows)[kProjectionChunk], std::size_t padded, double
   sums[out] = sum(residuals, residuals, nullptr);
 }
 
-// A point and its normal (xyz) moved by transform [R | t] (a ColumnMotion's
-// 12 floats, column-major).
-inline void moveOne(const float* transform, const float* point, const float* normal, float* __restrict moved,
-                    float* __restrict moved_normal) {
-  for (int axis = 0; axis < 3; ++axis) {
-    moved[axis] = transform[axis] * point[0] + transform[3 + axis] * point[1] + transform[6 + axis] * point[2] +
-                  transform[9 + axis];
-    moved_normal[axis] =
-        transform[axis] * normal[0] + transform[3 + axis] * normal[1] + transform[6 + axis] * normal[2];
-  }
-}
-
-// Source points and normals (xyz triples) into the target frame: each by
-// the transform of its full-resolution column (per_column: the
-// target_from_source transform composed with the column's deskew motion),
-// else all by the first. Plain arrays (no Eigen type inside a clone) so
-// that it vectorises. Cloned for AVX2.
+// The six coordinate arrays of a chunk: x, y, z of the points, then of
+// their normals (SourceLevel's order).
+constexpr int kCoordinates = 6;
+using ChunkCoordinates = float[kCoordinates][kProjectionChunk];
 constexpr int kTransformFloats = ColumnMotion::SizeAtCompileTime;
+
+// Source points and normals into the target frame, [R | t] p and R n, with
+// R and t entry j of a transform at transforms[j * stride + i] (column-major
+// [R | t]): i is the point's full-resolution column where per_column (the
+// target_from_source transform composed with the column's deskew motion,
+// gathered per point), else 0 (one transform for all). Each coordinate sums
+// its three products left to right, then adds the translation. Plain arrays
+// over separate coordinates so that it vectorises; cloned for AVX2 (no FMA:
+// every product rounds).
 RANGE_IMAGE_MAPPING_AVX2_CLONES
-void moveChunk(const float* points, const float* normals, const int* columns, std::size_t count,
-               const float* transforms, bool per_column, float* moved, float* moved_normals) {
-  if (per_column)
+void moveChunk(const float* const* source, std::size_t first, const int* columns, std::size_t count,
+               const float* transforms, std::size_t stride, bool per_column,
+               float (*__restrict moved)[kProjectionChunk]) {
+  const float *x = source[0] + first, *y = source[1] + first, *z = source[2] + first;
+  const float *nx = source[3] + first, *ny = source[4] + first, *nz = source[5] + first;
+  if (per_column) {
+    for (std::size_t k = 0; k < count; ++k) {
+      const int c = columns[k];
+      for (int axis = 0; axis < 3; ++axis) {
+        const float r0 = transforms[std::size_t(axis) * stride + c];
+        const float r1 = transforms[std::size_t(3 + axis) * stride + c];
+        const float r2 = transforms[std::size_t(6 + axis) * stride + c];
+        const float t = transforms[std::size_t(9 + axis) * stride + c];
+        moved[axis][k] = r0 * x[k] + r1 * y[k] + r2 * z[k] + t;
+        moved[3 + axis][k] = r0 * nx[k] + r1 * ny[k] + r2 * nz[k];
+      }
+    }
+  } else {
+    float transform[kTransformFloats];
+    for (int j = 0; j < kTransformFloats; ++j) transform[j] = transforms[j];
     for (std::size_t k = 0; k < count; ++k)
-      moveOne(transforms + kTransformFloats * columns[k], points + 3 * k, normals + 3 * k, moved + 3 * k,
-              moved_normals + 3 * k);
-  else
-    for (std::size_t k = 0; k < count; ++k)
-      moveOne(transforms, points + 3 * k, normals + 3 * k, moved + 3 * k, moved_normals + 3 * k);
+      for (int axis = 0; axis < 3; ++axis) {
+        moved[axis][k] = transform[axis] * x[k] + transform[3 + axis] * y[k] + transform[6 + axis] * z[k] +
+                         transform[9 + axis];
+        moved[3 + axis][k] = transform[axis] * nx[k] + transform[3 + axis] * ny[k] + transform[6 + axis] * nz[k];
+      }
+  }
 }
 
 // A target level as plain arrays. levelPixelIndex is the sum of a row part
@@ -117,21 +131,21 @@ struct TargetArrays {
 // free over plain arrays so that it vectorises: the target look-ups become
 // gathers, a rejected point gets zero rows (paired is an integer mask; every
 // comparison is false for a NaN target normal). A source point without a
-// normal has a zero one: m.n >= cos |m|^2 holds for it. moved and source_normals are
-// xyz triples. The rows must not overlap the inputs (restrict: gathers are
-// not vectorised past stores that may alias them). Cloned for AVX2. Returns
-// the number of pairs.
+// normal has a zero one: m.n >= cos |m|^2 holds for it. moved holds the
+// moved points and normals (moveChunk). The rows must not overlap the inputs
+// (restrict: gathers are not vectorised past stores that may alias them).
+// Cloned for AVX2. Returns the number of pairs.
 RANGE_IMAGE_MAPPING_AVX2_CLONES
-std::size_t pairRows(const float* moved, const float* source_normals, const ProjectedPixel* pixels,
-                     const uint8_t* hits, std::size_t count, const TargetArrays& target,
-                     float max_distance_squared, float min_cosine, float (*__restrict rows)[kProjectionChunk]) {
+std::size_t pairRows(const ChunkCoordinates& moved, const ProjectedPixel* pixels, const uint8_t* hits,
+                     std::size_t count, const TargetArrays& target, float max_distance_squared, float min_cosine,
+                     float (*__restrict rows)[kProjectionChunk]) {
   std::size_t inliers = 0;
   for (std::size_t k = 0; k < count; ++k) {
     const int hit = hits[k];
     // Pixel 0 where there is no hit; 32-bit indices, as a gather takes them.
     const int t = 3 * (target.row_start[pixels[k].row & -hit] + target.column[pixels[k].column & -hit]);
-    const float* p = moved + 3 * k;
-    const float* m = source_normals + 3 * k;
+    const float p[3] = {moved[0][k], moved[1][k], moved[2][k]};
+    const float m[3] = {moved[3][k], moved[4][k], moved[5][k]};
     const float nx = target.normals[t], ny = target.normals[t + 1], nz = target.normals[t + 2];
     const float dx = p[0] - target.points[t], dy = p[1] - target.points[t + 1], dz = p[2] - target.points[t + 2];
     const int paired = hit & int(dx * dx + dy * dy + dz * dz <= max_distance_squared) &
@@ -146,6 +160,24 @@ std::size_t pairRows(const float* moved, const float* source_normals, const Proj
     inliers += std::size_t(paired);
   }
   return inliers;
+}
+
+// The area weights (range^2 up to the cap, over the cap's square) of a
+// chunk's moved points: each pair's weight multiplied by its point's, and
+// the point's in paired_areas where it has a pair (a non-zero normal row),
+// else zero. Cloned for AVX2.
+RANGE_IMAGE_MAPPING_AVX2_CLONES
+void areaWeights(const ChunkCoordinates& moved, float (*__restrict rows)[kProjectionChunk], std::size_t count,
+                 float max_range_squared, float* __restrict paired_areas) {
+  float* weights = rows[ChunkPairs::kWeight];
+  for (std::size_t k = 0; k < count; ++k) {
+    // Summed as Eigen's squaredNorm sums three terms: x^2 + (y^2 + z^2).
+    const float x = moved[0][k], y = moved[1][k], z = moved[2][k];
+    const float area = std::min(x * x + (y * y + z * z), max_range_squared) / max_range_squared;
+    weights[k] *= area;
+    const int paired = int(rows[3][k] != 0.0f) | int(rows[4][k] != 0.0f) | int(rows[5][k] != 0.0f);
+    paired_areas[k] = zeroUnless(area, paired);
+  }
 }
 
 // Normal equations of one Gauss-Newton step, summed per thread and joined.
@@ -251,8 +283,8 @@ namespace {
 // Pairs of one iteration (paper eq. 5-6) and their point-to-plane normal
 // equations, in one parallel pass over the source points (moved by the
 // transforms as moveChunk moves them).
-NormalEquations accumulate(const std::vector<Eigen::Vector3f>& points, const std::vector<Eigen::Vector3f>& normals,
-                           const std::vector<int>& columns, const ColumnMotion* transforms, bool per_column,
+NormalEquations accumulate(const std::array<const float*, kCoordinates>& source, const std::vector<int>& columns,
+                           const float* transforms, std::size_t transform_stride, bool per_column,
                            const LidarModel& target_model, const TargetArrays& target_arrays,
                            const RegistrationOptions& options, double area_weight_range_m, double gate_m) {
   const float max_distance_squared = float(gate_m * gate_m);
@@ -264,35 +296,32 @@ NormalEquations accumulate(const std::vector<Eigen::Vector3f>& points, const std
   // Deterministic: the same blocks summed in the same order on every run and
   // thread count, so rim run and the nodelets give the same poses to the bit.
   return tbb::parallel_deterministic_reduce(
-      tbb::blocked_range<std::size_t>(0, points.size(), 2048), NormalEquations{},
+      tbb::blocked_range<std::size_t>(0, columns.size(), 2048), NormalEquations{},
       [&](const tbb::blocked_range<std::size_t>& block, NormalEquations sum) {
-        std::array<Eigen::Vector3f, kProjectionChunk> moved, source_normals;
+        alignas(32) ChunkCoordinates moved;
         std::array<ProjectedPixel, kProjectionChunk> pixels;
         std::array<uint8_t, kProjectionChunk> hits;
         ChunkPairs pairs;
         for (std::size_t first = block.begin(); first < block.end(); first += kProjectionChunk) {
           const std::size_t count = std::min(kProjectionChunk, block.end() - first);
-          moveChunk(points[first].data(), normals[first].data(), &columns[first], count, transforms->data(),
-                    per_column, moved.data()->data(), source_normals.data()->data());
-          target_model.projectMany(moved.data(), count, pixels.data(), hits.data());
+          moveChunk(source.data(), first, &columns[first], count, transforms, transform_stride, per_column, moved);
+          target_model.projectMany(moved[0], moved[1], moved[2], count, pixels.data(), hits.data());
           // Association and rows, then the weights' square roots and the sums.
           pairs.count = count;
-          pairs.inliers = pairRows(moved.data()->data(), source_normals.data()->data(), pixels.data(), hits.data(),
-                                   count, target_arrays, max_distance_squared, min_cosine, pairs.rows);
+          pairs.inliers = pairRows(moved, pixels.data(), hits.data(), count, target_arrays, max_distance_squared,
+                                   min_cosine, pairs.rows);
           weight_of.weights(pairs.rows[ChunkPairs::kResidual], pairs.count, pairs.rows[ChunkPairs::kWeight]);
           if (area_weighted) {
             // Each pair weighted by the surface its pixel covers (range^2,
             // relative to the cap): a range image samples near surfaces
             // densely, and a near object (a truck alongside, the ground
             // rings) would otherwise outvote the far, static world.
+            // The pairs' areas (zero for a point without a pair) summed
+            // in order, in double.
+            alignas(32) float paired_areas[kProjectionChunk];
+            areaWeights(moved, pairs.rows, count, max_range_squared, paired_areas);
             pairs.area_weights = 0.0;
-            float* weights = pairs.rows[ChunkPairs::kWeight];
-            for (std::size_t k = 0; k < count; ++k) {
-              const float area = std::min(moved[k].squaredNorm(), max_range_squared) / max_range_squared;
-              weights[k] *= area;
-              if (pairs.rows[3][k] != 0.0f || pairs.rows[4][k] != 0.0f || pairs.rows[5][k] != 0.0f)
-                pairs.area_weights += area;
-            }
+            for (std::size_t k = 0; k < count; ++k) pairs.area_weights += paired_areas[k];
           } else {
             pairs.area_weights = double(pairs.inliers);
           }
@@ -497,8 +526,7 @@ void ProjectiveIcp::prepareSource(const VertexNormalMap& source) const {
     });
     for (int r = 0; r < rows; ++r) row_offsets_[r + 1] += row_offsets_[r];
     SourceLevel& kept = source_levels_[level];
-    kept.points.resize(row_offsets_[rows]);
-    kept.normals.resize(row_offsets_[rows]);
+    for (std::vector<float>& coordinate : kept.coordinates) coordinate.resize(row_offsets_[rows]);
     kept.columns.resize(row_offsets_[rows]);
     tbb::parallel_for(tbb::blocked_range<int>(0, rows), [&](const tbb::blocked_range<int>& block) {
       for (int r = block.begin(); r < block.end(); ++r) {
@@ -507,9 +535,13 @@ void ProjectiveIcp::prepareSource(const VertexNormalMap& source) const {
         for (int column = 0; column < source.columns; column += step) {
           const std::size_t i = first + column;
           if (!usable(i)) continue;
-          kept.points[out] = source.points[i];
           // No normal: zero, which passes the agreement check in pairRows.
-          kept.normals[out] = std::isfinite(source.normals[i].x()) ? source.normals[i] : Eigen::Vector3f::Zero();
+          const Eigen::Vector3f normal =
+              std::isfinite(source.normals[i].x()) ? source.normals[i] : Eigen::Vector3f::Zero();
+          for (int axis = 0; axis < 3; ++axis) {
+            kept.coordinates[SourceLevel::kX + axis][out] = source.points[i][axis];
+            kept.coordinates[SourceLevel::kNormalX + axis][out] = normal[axis];
+          }
           kept.columns[out] = column * source.stride;
           ++out;
         }
@@ -561,21 +593,27 @@ RegistrationResult ProjectiveIcp::alignSource(const Eigen::Isometry3d& initial_t
     const TargetArrays target_arrays{target.points.data()->data(), target.normals.data()->data(),
                                      target_index_tables_[level].row_start.data(),
                                      target_index_tables_[level].column.data()};
+    std::array<const float*, kCoordinates> source_arrays;
+    for (int k = 0; k < kCoordinates; ++k) source_arrays[k] = source.coordinates[k].data();
     for (int iteration = 0; iteration < iterations; ++iteration) {
       const Eigen::Matrix3f rotation = result.target_from_source.linear().cast<float>();
       const Eigen::Vector3f translation = result.target_from_source.translation().cast<float>();
       if (column_motion.empty()) {
         ColumnMotion rigid;
         rigid << rotation, translation;
-        last = accumulate(source.points, source.normals, source.columns, &rigid, false, *target_model_,
-                          target_arrays, options_, area_weight_range_m_, gate_m);
+        last = accumulate(source_arrays, source.columns, rigid.data(), 1, false, *target_model_, target_arrays,
+                          options_, area_weight_range_m_, gate_m);
       } else {
-        column_transforms_.resize(column_motion.size());
-        for (std::size_t u = 0; u < column_motion.size(); ++u) {
-          column_transforms_[u].leftCols<3>() = rotation * column_motion[u].leftCols<3>();
-          column_transforms_[u].col(3) = rotation * column_motion[u].col(3) + translation;
+        const std::size_t columns = column_motion.size();
+        column_transforms_.resize(kTransformFloats * columns);
+        for (std::size_t u = 0; u < columns; ++u) {
+          ColumnMotion transform;
+          transform.leftCols<3>() = rotation * column_motion[u].leftCols<3>();
+          transform.col(3) = rotation * column_motion[u].col(3) + translation;
+          for (int j = 0; j < kTransformFloats; ++j)
+            column_transforms_[std::size_t(j) * columns + u] = transform.data()[j];
         }
-        last = accumulate(source.points, source.normals, source.columns, column_transforms_.data(), true,
+        last = accumulate(source_arrays, source.columns, column_transforms_.data(), columns, true,
                           *target_model_, target_arrays, options_, area_weight_range_m_, gate_m);
       }
       ++result.iterations;

@@ -8,6 +8,7 @@
 
 #include <Eigen/Geometry>
 
+#include <array>
 #include <limits>
 #include <vector>
 
@@ -173,10 +174,14 @@ class ProjectiveIcp {
 
  private:
   // One level's source pixels with normals, and the full-resolution column
-  // of each (for its column motion).
+  // of each (for its column motion). The points' and normals' coordinates
+  // as separate arrays (x, y, z of the points, then of the normals): the
+  // per-point passes vectorise over them.
   struct SourceLevel {
-    std::vector<Eigen::Vector3f> points, normals;
+    enum Coordinate { kX, kY, kZ, kNormalX, kNormalY, kNormalZ, kCoordinates };
+    std::array<std::vector<float>, kCoordinates> coordinates;
     std::vector<int> columns;
+    std::size_t size() const { return columns.size(); }
   };
   void prepareSource(const VertexNormalMap& source) const;
   void setTargetModel(const LidarModelConstPtr& model);
@@ -193,7 +198,9 @@ class ProjectiveIcp {
   mutable std::vector<std::size_t> row_offsets_;    // prepareSource: first kept pixel of each row
   mutable bool has_source_ = false;
   mutable std::size_t source_full_columns_ = 0;  // columns of the source's full resolution
-  mutable std::vector<ColumnMotion> column_transforms_;  // per column: target_from_source * motion
+  // Per column, target_from_source * motion: entry j (column-major [R | t])
+  // of column u at j * columns + u, 12 arrays the moving pass gathers from.
+  mutable std::vector<float> column_transforms_;
 };
 
 }  // namespace range_image_mapping::registration
