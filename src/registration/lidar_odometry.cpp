@@ -52,6 +52,43 @@ constexpr float kInFrontTwiceMarginShare = 1.0f / 3.0f;
 // sensor's sparse outer rows) the model's surface is that coarse.
 constexpr float kInFrontTwiceRowGaps = 1.0f;
 
+// classifyMoving's verdicts on a point against the model's surface at its
+// pixel, before the two-scan rules.
+enum PointVerdict : uint8_t { kAgrees = 0, kInFrontByMargin, kInFrontByShare, kBehindByMargin };
+
+// classifyMoving's test of one chunk of projected points (x, y, z in the
+// target frame) against the target's points and normals (xyz triples, a
+// full-resolution map target_columns wide): branch free over plain arrays,
+// so that it vectorises (the target look-ups as gathers). A point without a
+// hit, or whose pixel has no finite point and normal, agrees. The dot
+// products and norms sum three terms as Eigen's do, a + (b + c).
+// Cloned for AVX2 (no FMA).
+RANGE_IMAGE_MAPPING_AVX2_CLONES
+void judgePoints(const float* x, const float* y, const float* z, const ProjectedPixel* pixels, const uint8_t* hits,
+                 std::size_t count, const float* target_points, const float* target_normals, int target_columns,
+                 const float* row_gap_rad, float margin, float twice_margin, uint8_t* __restrict verdicts) {
+  constexpr float kLargest = std::numeric_limits<float>::max();
+  for (std::size_t k = 0; k < count; ++k) {
+    const int hit = hits[k];
+    const int row = pixels[k].row & -hit;
+    const int t = 3 * (row * target_columns + (pixels[k].column & -hit));
+    const float sx = target_points[t], sy = target_points[t + 1], sz = target_points[t + 2];
+    const float nx = target_normals[t], ny = target_normals[t + 1], nz = target_normals[t + 2];
+    const int finite = int(std::abs(sx) <= kLargest) & int(std::abs(sy) <= kLargest) & int(std::abs(sz) <= kLargest) &
+                       int(std::abs(nx) <= kLargest) & int(std::abs(ny) <= kLargest) & int(std::abs(nz) <= kLargest);
+    // Normals face the sensor: positive is in front of the surface.
+    const float in_front_m = nx * (x[k] - sx) + (ny * (y[k] - sy) + nz * (z[k] - sz));
+    const float range_m = std::sqrt(x[k] * x[k] + (y[k] * y[k] + z[k] * z[k]));
+    const int nearer = int(range_m < std::sqrt(sx * sx + (sy * sy + sz * sz)));
+    const int by_margin = int(in_front_m > margin) & nearer;
+    const int by_share = nearer & int(in_front_m > std::max(twice_margin, row_gap_rad[row] * range_m));
+    const int behind = int(-in_front_m > margin) & (1 - nearer);
+    const int verdict = by_margin * kInFrontByMargin +
+                        (1 - by_margin) * (by_share * kInFrontByShare + (1 - by_share) * behind * kBehindByMargin);
+    verdicts[k] = uint8_t(verdict * (hit & finite));
+  }
+}
+
 // With normals from the model, the source's pixels without a normal of their
 // own (a sparse sensor's ground) pair with the model's planes.
 RegistrationOptions registrationOptions(const OdometryOptions& options) {
@@ -469,36 +506,34 @@ std::size_t LidarOdometry::classifyMoving(const LidarModel& model, const Eigen::
       tbb::blocked_range<std::size_t>(0, size, kChunk), std::size_t(0),
       [&](const tbb::blocked_range<std::size_t>& block, std::size_t count) {
         // Projected in chunks (projectMany): several times faster than one by one.
-        Eigen::Vector3f points[kChunk];
+        alignas(32) float x[kChunk], y[kChunk], z[kChunk];
         std::size_t pixel_of[kChunk];
-        uint8_t hits[kChunk];
+        uint8_t hits[kChunk], verdicts[kChunk];
         for (std::size_t first = block.begin(); first < block.end(); first += kChunk) {
           const std::size_t end = std::min(block.end(), first + kChunk);
           ProjectedPixel* pixels = &projected_[first];
           std::size_t n = 0;
           for (std::size_t i = first; i < end; ++i) {
             if (!deskewed_.normals[i].allFinite()) continue;
-            points[n] = transform * deskewed_.points[i];
+            const Eigen::Vector3f point = transform * deskewed_.points[i];
+            x[n] = point.x();
+            y[n] = point.y();
+            z[n] = point.z();
             pixel_of[n++] = i;
           }
-          model.projectMany(points, n, pixels, hits);
+          model.projectMany(x, y, z, n, pixels, hits);
+          judgePoints(x, y, z, pixels, hits, n, target.points.data()->data(), target.normals.data()->data(),
+                      target.columns, row_gap_rad.data(), margin, twice_margin, verdicts);
           for (std::size_t k = 0; k < n; ++k) {
-            if (!hits[k]) continue;
-            const std::size_t t = levelPixelIndex(target, pixels[k]);
-            const Eigen::Vector3f& surface = target.points[t];
-            const Eigen::Vector3f& normal = target.normals[t];
-            if (!surface.allFinite() || !normal.allFinite()) continue;
-            // Normals face the sensor: positive is in front of the surface.
-            const float in_front_m = normal.dot(points[k] - surface);
-            const bool nearer = points[k].norm() < surface.norm();
-            if (in_front_m > margin && nearer) {
+            if (verdicts[k] == kAgrees) continue;
+            if (verdicts[k] == kInFrontByMargin) {
               moving_[pixel_of[k]] = 1;
               ++count;
-            } else if (nearer &&
-                       in_front_m > std::max(twice_margin, row_gap_rad[std::size_t(pixels[k].row)] * points[k].norm())) {
+            } else if (verdicts[k] == kInFrontByShare) {
               moving_[pixel_of[k]] = kInFrontOnce;  // moving if it was in the last scan too (below)
-            } else if (-in_front_m > margin && !nearer &&
-                       normal.dot(transform.linear() * deskewed_.normals[pixel_of[k]]) > kStaleNormalCosine) {
+            } else if (target.normals[levelPixelIndex(target, pixels[k])].dot(transform.linear() *
+                                                                               deskewed_.normals[pixel_of[k]]) >
+                       kStaleNormalCosine) {
               stale_[pixel_of[k]] = 1;  // behind the model; stale if it was in the last scan too (below)
             }
           }
