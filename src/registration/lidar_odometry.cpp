@@ -89,6 +89,48 @@ void judgePoints(const float* x, const float* y, const float* z, const Projected
   }
 }
 
+// classifyMoving's pixels (points and normals as xyz triples) moved by an
+// isometry (its 4 x 4 matrix, column-major), each coordinate as Eigen's
+// Isometry3f * Vector3f sums it, left to right, and whether each has a
+// finite normal. Cloned for AVX2 (no FMA).
+constexpr std::size_t kClassifyChunk = 1024;
+RANGE_IMAGE_MAPPING_AVX2_CLONES
+void transformPixels(const float* points, const float* normals, std::size_t count, const float* transform,
+                     float (*__restrict moved)[kClassifyChunk], uint8_t* __restrict has_normal) {
+  constexpr float kLargest = std::numeric_limits<float>::max();
+  for (std::size_t k = 0; k < count; ++k) {
+    const float px = points[3 * k], py = points[3 * k + 1], pz = points[3 * k + 2];
+    for (int axis = 0; axis < 3; ++axis)
+      moved[axis][k] =
+          transform[axis] * px + transform[4 + axis] * py + transform[8 + axis] * pz + transform[12 + axis];
+    has_normal[k] = uint8_t(int(std::abs(normals[3 * k]) <= kLargest) &
+                            int(std::abs(normals[3 * k + 1]) <= kLargest) &
+                            int(std::abs(normals[3 * k + 2]) <= kLargest));
+  }
+}
+
+// One image row's points and normals (xyz triples) moved by their columns'
+// motions: entry j of column u's [R | t] (column-major) at
+// motions[j * columns + u]. Each coordinate as Eigen computes
+// motion.leftCols<3>() * p + motion.col(3): the first product plus the sum
+// of the other two, then the translation. Plain arrays, so that it
+// vectorises; the output must not overlap the input. Cloned for AVX2 (no
+// FMA).
+RANGE_IMAGE_MAPPING_AVX2_CLONES
+void moveRow(const float* points, const float* normals, const float* motions, std::size_t columns,
+             float* __restrict moved_points, float* __restrict moved_normals) {
+  for (std::size_t u = 0; u < columns; ++u) {
+    const float px = points[3 * u], py = points[3 * u + 1], pz = points[3 * u + 2];
+    const float nx = normals[3 * u], ny = normals[3 * u + 1], nz = normals[3 * u + 2];
+    for (std::size_t axis = 0; axis < 3; ++axis) {
+      const float r0 = motions[axis * columns + u], r1 = motions[(3 + axis) * columns + u];
+      const float r2 = motions[(6 + axis) * columns + u], t = motions[(9 + axis) * columns + u];
+      moved_points[3 * u + axis] = r0 * px + (r1 * py + r2 * pz) + t;
+      moved_normals[3 * u + axis] = r0 * nx + (r1 * ny + r2 * nz);
+    }
+  }
+}
+
 // With normals from the model, the source's pixels without a normal of their
 // own (a sparse sensor's ground) pair with the model's planes.
 RegistrationOptions registrationOptions(const OdometryOptions& options) {
@@ -498,7 +540,7 @@ std::size_t LidarOdometry::classifyMoving(const LidarModel& model, const Eigen::
   constexpr float kStaleNormalCosine = 0.9f;
   constexpr uint8_t kInFrontOnce = 2;  // in moving_ until the two-scan rule below decides
   const std::size_t size = deskewed_.points.size();
-  constexpr std::size_t kChunk = 1024;
+  constexpr std::size_t kChunk = kClassifyChunk;
   // Pixels in a reused buffer: a ProjectedPixel array on the stack is
   // zeroed on every chunk.
   projected_.resize(size);
@@ -506,20 +548,22 @@ std::size_t LidarOdometry::classifyMoving(const LidarModel& model, const Eigen::
       tbb::blocked_range<std::size_t>(0, size, kChunk), std::size_t(0),
       [&](const tbb::blocked_range<std::size_t>& block, std::size_t count) {
         // Projected in chunks (projectMany): several times faster than one by one.
-        alignas(32) float x[kChunk], y[kChunk], z[kChunk];
+        alignas(32) float moved[3][kChunk], x[kChunk], y[kChunk], z[kChunk];
         std::size_t pixel_of[kChunk];
-        uint8_t hits[kChunk], verdicts[kChunk];
+        uint8_t has_normal[kChunk], hits[kChunk], verdicts[kChunk];
         for (std::size_t first = block.begin(); first < block.end(); first += kChunk) {
           const std::size_t end = std::min(block.end(), first + kChunk);
           ProjectedPixel* pixels = &projected_[first];
+          // Every pixel moved, then those with a normal kept.
+          transformPixels(deskewed_.points[first].data(), deskewed_.normals[first].data(), end - first,
+                          transform.matrix().data(), moved, has_normal);
           std::size_t n = 0;
-          for (std::size_t i = first; i < end; ++i) {
-            if (!deskewed_.normals[i].allFinite()) continue;
-            const Eigen::Vector3f point = transform * deskewed_.points[i];
-            x[n] = point.x();
-            y[n] = point.y();
-            z[n] = point.z();
-            pixel_of[n++] = i;
+          for (std::size_t k = 0; k < end - first; ++k) {
+            x[n] = moved[0][k];
+            y[n] = moved[1][k];
+            z[n] = moved[2][k];
+            pixel_of[n] = first + k;
+            n += has_normal[k];
           }
           model.projectMany(x, y, z, n, pixels, hits);
           judgePoints(x, y, z, pixels, hits, n, target.points.data()->data(), target.normals.data()->data(),
@@ -594,21 +638,28 @@ void LidarOdometry::addKeyframe(const RangeImage& scan, bool deskewed) {
 // the lidar frame at the scan time: p0 = exp((t - t0) * twist) * p. Pixel
 // (i, j) of a level of stride s is full-resolution column s * j.
 void LidarOdometry::moveColumns(const VertexNormalMap& measured, VertexNormalMap& moved) const {
-  if (&moved != &measured) {
-    moved.rows = measured.rows;
-    moved.columns = measured.columns;
-    moved.stride = measured.stride;
-    moved.points.resize(measured.points.size());
-    moved.normals.resize(measured.normals.size());
+  if (&moved == &measured) {  // moveRow's output must not overlap its input
+    const VertexNormalMap copy = measured;
+    moveColumns(copy, moved);
+    return;
   }
+  moved.rows = measured.rows;
+  moved.columns = measured.columns;
+  moved.stride = measured.stride;
+  moved.points.resize(measured.points.size());
+  moved.normals.resize(measured.normals.size());
+  // The level columns' motions as 12 arrays, one entry per column.
+  const std::size_t columns = std::size_t(measured.columns);
+  constexpr int kMotionFloats = ColumnMotion::SizeAtCompileTime;
+  std::vector<float> motions(kMotionFloats * columns);
+  for (std::size_t u = 0; u < columns; ++u)
+    for (int j = 0; j < kMotionFloats; ++j) motions[j * columns + u] = column_motion_[u * measured.stride].data()[j];
   tbb::parallel_for(tbb::blocked_range<int>(0, measured.rows), [&](const tbb::blocked_range<int>& rows) {
-    for (int v = rows.begin(); v < rows.end(); ++v)
-      for (int u = 0; u < measured.columns; ++u) {
-        const std::size_t i = std::size_t(v) * measured.columns + u;
-        const Eigen::Matrix<float, 3, 4>& motion = column_motion_[std::size_t(u) * measured.stride];
-        moved.points[i] = motion.leftCols<3>() * measured.points[i] + motion.col(3);
-        moved.normals[i] = motion.leftCols<3>() * measured.normals[i];
-      }
+    for (int v = rows.begin(); v < rows.end(); ++v) {
+      const std::size_t first = std::size_t(v) * columns;
+      moveRow(measured.points[first].data(), measured.normals[first].data(), motions.data(), columns,
+              moved.points[first].data(), moved.normals[first].data());
+    }
   });
 }
 
