@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -50,27 +51,33 @@ struct ChunkPairs {
 // the squared residuals of one padded chunk: sum_k a[k] b[k] * c[k] in kLanes
 // float partial sums each, at most kProjectionChunk / kLanes terms, so float
 // stays exact to about 1e-6 of the chunk's sum, far below what the solve
-// resolves (the chunks are then summed in double). Cloned for AVX2: the
-// eight lanes in one register instead of two, the same sums (no FMA, each
-// lane adds in the same order).
+// resolves (the chunks are then summed in double). All 28 in one pass over
+// the chunk, each row read once per lane group; every lane still adds its
+// terms in the order of k. Cloned for AVX2: the eight lanes in one register
+// instead of two, the same sums (no FMA).
 constexpr std::size_t kChunkSums = 28;
 RANGE_IMAGE_MAPPING_AVX2_CLONES
 void chunkSums(const float (*rows)[kProjectionChunk], std::size_t padded, double* sums) {
-  const auto sum = [padded](const float* a, const float* b, const float* c) {
-    float lanes[kLanes] = {};
-    for (std::size_t k = 0; k < padded; k += kLanes)
-      for (std::size_t l = 0; l < kLanes; ++l) lanes[l] += a[k + l] * b[k + l] * (c ? c[k + l] : 1.0f);
+  // kLanes floats as one value (GCC's vector extension): element-wise float
+  // arithmetic, one register with AVX2, two without.
+  using Lanes = float __attribute__((vector_size(kLanes * sizeof(float))));
+  Lanes partial[kChunkSums] = {};
+  for (std::size_t k = 0; k < padded; k += kLanes) {
+    Lanes jacobian[6], weight, residual;
+    for (int i = 0; i < 6; ++i) std::memcpy(&jacobian[i], rows[i] + k, sizeof(Lanes));
+    std::memcpy(&weight, rows[ChunkPairs::kWeight] + k, sizeof weight);
+    std::memcpy(&residual, rows[ChunkPairs::kResidual] + k, sizeof residual);
+    std::size_t out = 0;
+    for (int i = 0; i < 6; ++i)
+      for (int j = i; j < 6; ++j) partial[out++] += jacobian[i] * jacobian[j] * weight;
+    for (int i = 0; i < 6; ++i) partial[out++] += jacobian[i] * residual * weight;
+    partial[out] += residual * residual;
+  }
+  for (std::size_t out = 0; out < kChunkSums; ++out) {
     double total = 0.0;
-    for (float lane : lanes) total += lane;
-    return total;
-  };
-  const float* weights = rows[ChunkPairs::kWeight];
-  const float* residuals = rows[ChunkPairs::kResidual];
-  std::size_t out = 0;
-  for (int i = 0; i < 6; ++i)
-    for (int j = i; j < 6; ++j) sums[out++] = sum(rows[i], rows[j], weights);
-  for (int i = 0; i < 6; ++i) sums[out++] = sum(rows[i], residuals, weights);
-  sums[out] = sum(residuals, residuals, nullptr);
+    for (std::size_t l = 0; l < kLanes; ++l) total += partial[out][l];
+    sums[out] = total;
+  }
 }
 
 // The six coordinate arrays of a chunk: x, y, z of the points, then of
