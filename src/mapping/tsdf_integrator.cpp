@@ -473,11 +473,13 @@ std::vector<int> rowsByAltitude(const LidarIntrinsics& intrinsics) {
 // settle lie where the sweep's start and end overlap or leave a gap (the
 // seam): they miss this scan rather than being averaged with the wrong
 // sensor position.
-// Works on the block's selected voxels (buffers.lattice and buffers.points,
+// Works on the block's selected voxels (their lattice coordinates
+// lattice_i, _j, _k and buffers.points,
 // count of them); leaves each voxel hit in the frame of its column in
 // buffers.moved.
 void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion, const Eigen::Vector3f& first,
-                             const Eigen::Matrix3f& lattice_steps, int edge, std::size_t count,
+                             const Eigen::Matrix3f& lattice_steps, int edge, const float* lattice_i,
+                             const float* lattice_j, const float* lattice_k, std::size_t count,
                              BlockBuffers& buffers) {
   const Eigen::Vector3f block_centre = first + lattice_steps * Eigen::Vector3f::Constant(0.5f * float(edge - 1));
   const int centre_column = columnSeenFromMovingSensor(model, motion, block_centre);
@@ -491,8 +493,7 @@ void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion,
     // The block's lattice in the centre column's frame.
     const Eigen::Vector3f moved_first = motion.toColumnFrame(centre_column, first);
     const Eigen::Matrix3f moved_steps = motion.inverse[centre_column].leftCols<3>() * lattice_steps;
-    transformLattice(moved_first, moved_steps, buffers.lattice.x.data(), buffers.lattice.y.data(),
-                     buffers.lattice.z.data(), count, moved.x, moved.y, moved.z);
+    transformLattice(moved_first, moved_steps, lattice_i, lattice_j, lattice_k, count, moved.x, moved.y, moved.z);
     model.projectMany(moved.x, moved.y, moved.z, count, pixels, hits);
     for (std::size_t i = 0; i < count; ++i) {
       // A miss here is a voxel off the vertical field of view by more than
@@ -883,15 +884,19 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
       const float *cell_i = cells.lattice_i.data(), *cell_j = cells.lattice_j.data(), *cell_k = cells.lattice_k.data();
       const PointPointers lattice(buffers.lattice), points(buffers.points);
       uint32_t* selected = buffers.voxel_index.data();
+      // The selection: the table's entries where it has them (read in place),
+      // else the buffers filled below.
+      const uint32_t* voxel_index = selected;
+      const float *lattice_i = lattice.x, *lattice_j = lattice.y, *lattice_k = lattice.z;
       const std::size_t voxel_rows = std::size_t(edge) * edge;
       std::size_t count = 0;
       if (!cells.selection_start.empty()) {
         const std::size_t first_selected = cells.selection_start[activated];
         count = cells.selection_start[activated + 1] - first_selected;
-        std::copy_n(cells.selection_index.data() + first_selected, count, selected);
-        std::copy_n(cells.selection_i.data() + first_selected, count, lattice.x);
-        std::copy_n(cells.selection_j.data() + first_selected, count, lattice.y);
-        std::copy_n(cells.selection_k.data() + first_selected, count, lattice.z);
+        voxel_index = cells.selection_index.data() + first_selected;
+        lattice_i = cells.selection_i.data() + first_selected;
+        lattice_j = cells.selection_j.data() + first_selected;
+        lattice_k = cells.selection_k.data() + first_selected;
       } else {
         for (std::size_t row = 0; row < voxel_rows; ++row) {
           if (!(cells.row_selecting_cells[row] & activated)) continue;
@@ -905,15 +910,15 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
           }
         }
       }
-      transformLattice(first, lattice_steps, lattice.x, lattice.y, lattice.z, count, points.x, points.y, points.z);
+      transformLattice(first, lattice_steps, lattice_i, lattice_j, lattice_k, count, points.x, points.y, points.z);
       if (moving) {
-        projectIntoMovingSensor(model, sweep_motion, first, lattice_steps, edge, count, buffers);
+        projectIntoMovingSensor(model, sweep_motion, first, lattice_steps, edge, lattice_i, lattice_j, lattice_k, count,
+                                buffers);
       } else {
         model.projectMany(points.x, points.y, points.z, count, buffers.pixels.data(), buffers.hits.data());
       }
       // Raw pointers: the compiler cannot prove the vectors' members unchanged
       // by the stores below and would reload them for every voxel.
-      const uint32_t* voxel_index = buffers.voxel_index.data();
       const uint8_t* hits = buffers.hits.data();
       const ProjectedPixel* pixels = buffers.pixels.data();
       const PointPointers frame_points = moving ? PointPointers(buffers.moved) : points;
