@@ -305,10 +305,10 @@ struct BlockBuffers {
   PointArrays points, moved, scratch;
   std::vector<ProjectedPixel> pixels;
   std::vector<uint8_t> hits;
-  // Motion refinement: the column whose motion placed each voxel, and the
-  // voxels still to refine, packed for projectMany.
-  std::vector<int> motion_columns;
+  // Motion refinement: the voxels still to refine, packed for projectMany,
+  // and the column whose motion places each.
   std::vector<uint32_t> pending;
+  std::vector<int> motion_columns;
   std::vector<ProjectedPixel> pending_pixels;
   std::vector<uint8_t> pending_hits;
   // The block's selected voxels (those of its activated cells), in order:
@@ -405,8 +405,10 @@ namespace {
 
 // The sensor's motion within a sweep, per column (scan_motion.h).
 struct SweepMotion {
-  const std::vector<ColumnMotion>& inverse;  // scan-time frame -> column-time frame
-  const std::vector<float>& time;            // column time after the scan time, s
+  // Per column (pointers, not vector references: one load less in the
+  // voxel loops, where the compiler does not hoist the vectors' data).
+  const ColumnMotion* inverse;  // scan-time frame -> column-time frame
+  const float* time;            // column time after the scan time, s
   // A pixel measured this close in time to the motion that placed the voxel
   // is close enough (see motionTimeTolerance).
   float tolerance_s;
@@ -463,6 +465,28 @@ std::vector<int> rowsByAltitude(const LidarIntrinsics& intrinsics) {
   return by_altitude;
 }
 
+// The voxels picked by `voxels` (count of them, points of the scan-time
+// frame) moved into the frames of their columns, columns[n] for voxels[n]:
+// SweepMotion::toColumnFrame on plain floats, rounded as Eigen's
+// `rotation * point + translation` (its 3-term sums associate to the right,
+// the translation added last), so the coordinates are the same.
+RANGE_IMAGE_MAPPING_AVX2_CLONES
+void moveIntoColumnFrames(const ColumnMotion* inverse, const int* __restrict columns,
+                          const uint32_t* __restrict voxels, const float* __restrict x_all,
+                          const float* __restrict y_all, const float* __restrict z_all, std::size_t count,
+                          float* __restrict x, float* __restrict y, float* __restrict z) {
+  static_assert(sizeof(ColumnMotion) == 12 * sizeof(float), "column-major 3 x 4, unpadded");
+  const float* __restrict motion = inverse[0].data();
+  for (std::size_t n = 0; n < count; ++n) {  // vectorised
+    const float* m = motion + 12 * std::size_t(columns[n]);
+    const uint32_t i = voxels[n];
+    const float px = x_all[i], py = y_all[i], pz = z_all[i];
+    x[n] = (m[0] * px + (m[3] * py + m[6] * pz)) + m[9];
+    y[n] = (m[1] * px + (m[4] * py + m[7] * pz)) + m[10];
+    z[n] = (m[2] * px + (m[5] * py + m[8] * pz)) + m[11];
+  }
+}
+
 // Pi of a block's voxels into the moving sensor: each voxel as the sensor
 // saw it when the column that measured it fired (the fixed point above, for
 // every voxel). All voxels are first projected as the block centre's column
@@ -488,6 +512,9 @@ void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion,
   uint8_t* hits = buffers.hits.data();
   uint32_t* pending_voxels = buffers.pending.data();
   int* motion_columns = buffers.motion_columns.data();
+  // A copy the compiler keeps in registers for the settle checks (the byte
+  // stores to hits below might alias the original).
+  const SweepMotion local_motion = motion;
   std::size_t pending = 0;
   if (centre_column >= 0) {
     // The block's lattice in the centre column's frame.
@@ -499,7 +526,7 @@ void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion,
       // A miss here is a voxel off the vertical field of view by more than
       // the sensor moved between the two columns: it is left out.
       if (!hits[i]) continue;
-      if (!motion.settled(centre_column, pixels[i].column)) pending_voxels[pending++] = uint32_t(i);
+      if (!local_motion.settled(centre_column, pixels[i].column)) pending_voxels[pending++] = uint32_t(i);
     }
   } else {  // the centre is outside the field of view: start from the scan-time projection
     model.projectMany(points.x, points.y, points.z, count, pixels, hits);
@@ -509,22 +536,26 @@ void projectIntoMovingSensor(const LidarModel& model, const SweepMotion& motion,
   ProjectedPixel* pending_pixels = buffers.pending_pixels.data();
   uint8_t* pending_hits = buffers.pending_hits.data();
   for (int pass = 0; pass < kMotionRefinements && pending > 0; ++pass) {
-    for (std::size_t n = 0; n < pending; ++n) {
-      const uint32_t i = pending_voxels[n];
-      motion_columns[i] = pixels[i].column;
-      scratch.set(n, motion.toColumnFrame(motion_columns[i], points[i]));
-    }
+    for (std::size_t n = 0; n < pending; ++n) motion_columns[n] = pixels[pending_voxels[n]].column;
+    moveIntoColumnFrames(motion.inverse, motion_columns, pending_voxels, points.x, points.y, points.z, pending,
+                         scratch.x, scratch.y, scratch.z);
     model.projectMany(scratch.x, scratch.y, scratch.z, pending, pending_pixels, pending_hits);
-    std::size_t unsettled = 0;
     for (std::size_t n = 0; n < pending; ++n) {
       const uint32_t i = pending_voxels[n];
       hits[i] = pending_hits[n];
-      if (!hits[i]) continue;
+      if (!pending_hits[n]) continue;
       pixels[i] = pending_pixels[n];
       moved.x[i] = scratch.x[n];
       moved.y[i] = scratch.y[n];
       moved.z[i] = scratch.z[n];
-      if (!motion.settled(motion_columns[i], pixels[i].column)) pending_voxels[unsettled++] = i;
+    }
+    // Then the voxels still unsettled, packed in place (a separate pass: fewer
+    // pointers live at once).
+    std::size_t unsettled = 0;
+    for (std::size_t n = 0; n < pending; ++n) {
+      if (!pending_hits[n]) continue;
+      if (!local_motion.settled(motion_columns[n], pending_pixels[n].column))
+        pending_voxels[unsettled++] = pending_voxels[n];
     }
     pending = unsettled;
   }
@@ -839,7 +870,7 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
   const std::size_t voxels = static_cast<std::size_t>(grid.voxelsPerBlock());
   const bool with_intensity = grid.options().store_intensity && scan.intensity.size() == scan.range.size();
   const VoxelUpdate voxel_update{options_.max_weight, adding};
-  const SweepMotion sweep_motion{work.column_motion_inverse, work.column_time, time_tolerance_s};
+  const SweepMotion sweep_motion{work.column_motion_inverse.data(), work.column_time.data(), time_tolerance_s};
   work.voxels_updated.assign(touched_blocks_.size(), 0);
   work.voxels_selected.assign(touched_blocks_.size(), 0);
   work.block_drift.assign(touched_blocks_.size(), 0.0f);
@@ -870,6 +901,10 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, touched_blocks_.size(), 1),
                     [&](const tbb::blocked_range<std::size_t>& range) {
     BlockBuffers& buffers = work.thread_buffers.local();
+    // Copies the compiler keeps in registers (it would reload the captured
+    // originals after every voxel store, which might alias them).
+    const std::size_t image_columns = std::size_t(columns);
+    const float range_low = min_range, range_high = max_range, band = truncation;
     buffers.resize(voxels);
     for (std::size_t ordered = range.begin(); ordered != range.end(); ++ordered) {
       const std::size_t b = work.integration_order[ordered];
@@ -930,11 +965,11 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
       if (!planes) {
         for (std::size_t i = 0; i < count; ++i) {
           if (!hits[i]) continue;
-          const std::size_t p = std::size_t(pixels[i].row) * columns + pixels[i].column;
+          const std::size_t p = std::size_t(pixels[i].row) * image_columns + pixels[i].column;
           const float measured = ranges[p];
-          if (!(measured >= min_range && measured <= max_range)) continue;  // also NaN
+          if (!(measured >= range_low && measured <= range_high)) continue;  // also NaN
           const float along_ray = measured - pixels[i].range;                // eq. 9
-          if (along_ray < -truncation) continue;  // occluded: behind the surface
+          if (along_ray < -band) continue;  // occluded: behind the surface
           write(voxel_index[i], p, along_ray);
         }
       } else {
@@ -946,19 +981,19 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
         const PointPointers feet(buffers.scratch);
         for (std::size_t i = 0; i < count; ++i) {
           if (!hits[i]) continue;
-          const std::size_t p = std::size_t(pixels[i].row) * columns + pixels[i].column;
+          const std::size_t p = std::size_t(pixels[i].row) * image_columns + pixels[i].column;
           const PixelPlane& plane = planes[p];
-          if (!(plane.range >= min_range && plane.range <= max_range)) continue;  // also NaN
+          if (!(plane.range >= range_low && plane.range <= range_high)) continue;  // also NaN
           const float along_ray = plane.range - pixels[i].range;                  // eq. 9
           if (!(std::abs(along_ray) <= plane.reach)) {  // also without a normal (NaN)
-            if (along_ray < -truncation) continue;  // occluded: behind the surface
+            if (along_ray < -band) continue;  // occluded: behind the surface
             write(voxel_index[i], p, along_ray);
             continue;
           }
           const float to_plane = plane.distance(frame_points[i]);
-          if (to_plane < -truncation) continue;  // behind the surface
+          if (to_plane < -band) continue;  // behind the surface
           // Within the pixel's own truncation band the plane is the pixel's surface.
-          if (std::abs(along_ray) <= truncation) {
+          if (std::abs(along_ray) <= band) {
             write(voxel_index[i], p, to_plane);
           } else {
             unverified_voxels[unverified] = uint32_t(i);
@@ -971,14 +1006,14 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
           model.projectMany(feet.x, feet.y, feet.z, unverified, foot_pixels, foot_hits);
           for (std::size_t n = 0; n < unverified; ++n) {
             const std::size_t i = unverified_voxels[n];
-            const std::size_t p = std::size_t(pixels[i].row) * columns + pixels[i].column;
+            const std::size_t p = std::size_t(pixels[i].row) * image_columns + pixels[i].column;
             const PixelPlane& plane = planes[p];
             const float to_plane = plane.distance(frame_points[i]);
             // Farther along the ray the plane counts only where the image saw
             // it under the voxel (not past an object's edge, into its shadow),
             // and within plane_fill of that return (not across wide gaps
             // between beam rings).
-            const std::size_t q = std::size_t(foot_pixels[n].row) * columns + foot_pixels[n].column;
+            const std::size_t q = std::size_t(foot_pixels[n].row) * image_columns + foot_pixels[n].column;
             if (foot_hits[n] && std::abs(plane.distance(pixel_points[q])) <= plane_tolerance &&
                 (feet[n] - pixel_points[q]).squaredNorm() <= plane_fill_squared) {
               write(voxel_index[i], p, to_plane);  // (NaN for a pixel without a return fails the test)
