@@ -1,5 +1,7 @@
 #include "range_image_mapping/registration/lidar_odometry.h"
 
+#include "range_image_mapping/point_arrays.h"
+
 #include "range_image_mapping/scan_motion.h"
 
 #include <Eigen/LU>
@@ -89,24 +91,15 @@ void judgePoints(const float* x, const float* y, const float* z, const Projected
   }
 }
 
-// classifyMoving's pixels (points and normals as xyz triples) moved by an
-// isometry (its 4 x 4 matrix, column-major), each coordinate as Eigen's
-// Isometry3f * Vector3f sums it, left to right, and whether each has a
-// finite normal. Cloned for AVX2 (no FMA).
+// Whether each normal (xyz triples) is finite. Cloned for AVX2.
 constexpr std::size_t kClassifyChunk = 1024;
 RANGE_IMAGE_MAPPING_AVX2_CLONES
-void transformPixels(const float* points, const float* normals, std::size_t count, const float* transform,
-                     float (*__restrict moved)[kClassifyChunk], uint8_t* __restrict has_normal) {
+void finiteNormals(const float* normals, std::size_t count, uint8_t* __restrict has_normal) {
   constexpr float kLargest = std::numeric_limits<float>::max();
-  for (std::size_t k = 0; k < count; ++k) {
-    const float px = points[3 * k], py = points[3 * k + 1], pz = points[3 * k + 2];
-    for (int axis = 0; axis < 3; ++axis)
-      moved[axis][k] =
-          transform[axis] * px + transform[4 + axis] * py + transform[8 + axis] * pz + transform[12 + axis];
+  for (std::size_t k = 0; k < count; ++k)
     has_normal[k] = uint8_t(int(std::abs(normals[3 * k]) <= kLargest) &
                             int(std::abs(normals[3 * k + 1]) <= kLargest) &
                             int(std::abs(normals[3 * k + 2]) <= kLargest));
-  }
 }
 
 // One image row's points and normals (xyz triples) moved by their columns'
@@ -555,8 +548,9 @@ std::size_t LidarOdometry::classifyMoving(const LidarModel& model, const Eigen::
           const std::size_t end = std::min(block.end(), first + kChunk);
           ProjectedPixel* pixels = &projected_[first];
           // Every pixel moved, then those with a normal kept.
-          transformPixels(deskewed_.points[first].data(), deskewed_.normals[first].data(), end - first,
-                          transform.matrix().data(), moved, has_normal);
+          transformToArrays(deskewed_.points[first].data(), end - first, transform.matrix().data(), moved[0],
+                            moved[1], moved[2]);
+          finiteNormals(deskewed_.normals[first].data(), end - first, has_normal);
           std::size_t n = 0;
           for (std::size_t k = 0; k < end - first; ++k) {
             x[n] = moved[0][k];

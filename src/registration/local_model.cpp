@@ -1,5 +1,7 @@
 #include "range_image_mapping/registration/local_model.h"
 
+#include "range_image_mapping/point_arrays.h"
+
 #include "range_image_mapping/registration/projective_icp.h"
 
 #include <tbb/blocked_range.h>
@@ -195,20 +197,6 @@ void moveAndBin(const float* points, std::size_t count, const float* transform, 
   }
 }
 
-// Points (xyz triples) moved by [R | t] (a 4 x 4 matrix's first 12 floats,
-// column-major) into x, y, z arrays, as moveAndBin moves them. Cloned for AVX2.
-RANGE_IMAGE_MAPPING_AVX2_CLONES
-void movePoints(const float* points, std::size_t count, const float* transform, float* __restrict x,
-                float* __restrict y, float* __restrict z) {
-  float* const moved[3] = {x, y, z};
-  for (std::size_t k = 0; k < count; ++k) {
-    const float* point = points + 3 * k;
-    for (int axis = 0; axis < 3; ++axis)
-      moved[axis][k] =
-          ((transform[axis] * point[0] + transform[4 + axis] * point[1]) + transform[8 + axis] * point[2]) +
-          transform[12 + axis];
-  }
-}
 
 }  // namespace
 
@@ -430,8 +418,8 @@ void LocalModel::render(const LidarModel& model, const Eigen::Isometry3d& odom_f
                           ChunkBuffers chunk;
                           const std::size_t n = block.size();
                           if (n == 0) return;  // never; tells the compiler the arrays are set before projectMany
-                          movePoints(points.points[block.begin()].data(), n, view_from_keyframe.matrix().data(),
-                                     chunk.x, chunk.y, chunk.z);
+                          transformToArrays(points.points[block.begin()].data(), n, view_from_keyframe.matrix().data(),
+                                            chunk.x, chunk.y, chunk.z);
                           model.projectMany(chunk.x, chunk.y, chunk.z, n, chunk.pixels, chunk.hits);
                           for (std::size_t i = 0; i < n; ++i) {
                             const std::size_t number = first + block.begin() + i;
