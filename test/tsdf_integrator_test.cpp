@@ -403,29 +403,44 @@ TEST(TsdfIntegrator, EveryVoxelHoldsItsProjectiveDistance) {
   const float truncation = float(integrator.options().truncationFor(grid.options()));
   const Eigen::Isometry3d lidar_from_world = scan.pose.world_from_lidar.inverse();
   const LidarModel& model = *scan.image.model;
-  std::size_t updated = 0, occluded = 0, free_space_left = 0, band_left = 0;
+  std::size_t updated = 0, occluded = 0, free_space_left = 0, band_left = 0, on_pixel_edge = 0;
+  // What the voxel at `point_lidar` should hold if its centre falls in the pixel project() gives.
+  const auto expected = [&](const Eigen::Vector3f& point_lidar, bool count) {
+    std::pair<float, float> weight_sdf(0.0f, 0.0f);
+    const std::optional<ProjectedPixel> pixel = model.project(point_lidar);
+    if (!pixel) return weight_sdf;
+    const float measured = scan.image.at(pixel->row, pixel->column);
+    const float distance = measured - pixel->range;
+    if (measured >= 0.3f && measured <= 8.0f && distance >= -truncation) weight_sdf = {1.0f, std::min(distance, truncation)};
+    if (count) occluded += measured >= 0.3f && measured <= 8.0f && distance < -truncation;
+    return weight_sdf;
+  };
   forEachVoxel(grid, [&](const Eigen::Vector3i&, const Eigen::Vector3d& position, const Voxel& voxel) {
-    float expected_weight = 0.0f, expected_sdf = 0.0f;
-    const std::optional<ProjectedPixel> pixel = model.project((lidar_from_world * position).cast<float>());
-    if (pixel) {
-      const float measured = scan.image.at(pixel->row, pixel->column);
-      const float distance = measured - pixel->range;
-      if (measured >= 0.3f && measured <= 8.0f && distance >= -truncation) {
-        expected_weight = 1.0f;
-        expected_sdf = std::min(distance, truncation);
-      }
-      occluded += measured >= 0.3f && measured <= 8.0f && distance < -truncation;
-    }
+    const Eigen::Vector3f point_lidar = (lidar_from_world * position).cast<float>();
+    const auto [expected_weight, expected_sdf] = expected(point_lidar, true);
     if (voxel.weight == 0.0f && expected_weight > 0.0f) {  // outside the activated cells
       free_space_left += expected_sdf >= truncation;
       band_left += expected_sdf < truncation;
       return;
     }
-    ASSERT_EQ(voxel.weight, expected_weight) << position.transpose();
-    // projectMany and project agree to float rounding.
-    ASSERT_NEAR(voxel.sdf, expected_sdf, 1e-4f) << position.transpose();
-    updated += expected_weight > 0.0f;
+    if (voxel.weight != expected_weight || std::abs(voxel.sdf - expected_sdf) > 1e-4f) {
+      // The integrator moves the voxel with float arithmetic of its own: a centre within rounding (a few
+      // micrometres) of a pixel's edge may land in the neighbour. It must then hold the neighbour's value.
+      bool neighbour_matches = false;
+      for (int axis = 0; axis < 3 && !neighbour_matches; ++axis)
+        for (const float step : {-5e-6f, 5e-6f}) {
+          const auto [weight, sdf] = expected(point_lidar + step * Eigen::Vector3f::Unit(axis), false);
+          neighbour_matches |= voxel.weight == weight && std::abs(voxel.sdf - sdf) <= 1e-4f;
+        }
+      ASSERT_TRUE(neighbour_matches) << "voxel at " << position.transpose() << " holds weight " << voxel.weight
+                                     << ", sdf " << voxel.sdf << "; its pixel gives " << expected_weight << ", "
+                                     << expected_sdf << " and no pixel within 5 um of it gives that";
+      ++on_pixel_edge;
+    }
+    updated += voxel.weight > 0.0f;
   });
+  std::printf("%zu voxels on a pixel's edge took the neighbour's value\n", on_pixel_edge);
+  EXPECT_LE(on_pixel_edge, 10u) << "more voxels than rounding explains hold another pixel's value";
   std::printf("%zu voxels written, %zu left as far free space, %zu in the band left\n", updated, free_space_left,
               band_left);
   EXPECT_GT(updated, 200000u);
