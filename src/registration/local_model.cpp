@@ -125,17 +125,41 @@ void LocalModel::add(const std::vector<VertexNormalMap>& levels, const Eigen::Is
   keyframe.odom_from_lidar = odom_from_lidar;
   keyframe.provisional = provisional;
   keyframe.levels.resize(levels.size());
+  // Each level's pixels kept, in pixel order: counted per fixed chunk, then
+  // copied chunk by chunk in parallel.
+  constexpr std::size_t kCopyChunk = 4096;
   for (std::size_t l = 0; l < levels.size(); ++l) {
     const VertexNormalMap& map = levels[l];
     Level& level = keyframe.levels[l];
     level.stride = map.stride;
-    level.points.clear();
-    level.normals.clear();
-    for (std::size_t i = 0; i < map.points.size(); ++i) {
-      if (!map.points[i].allFinite() || (!model_normals && !map.normals[i].allFinite())) continue;
-      level.points.push_back(map.points[i]);
-      level.normals.push_back(map.normals[i]);
-    }
+    const auto kept = [&](std::size_t i) {
+      return map.points[i].allFinite() && (model_normals || map.normals[i].allFinite());
+    };
+    const std::size_t chunks = (map.points.size() + kCopyChunk - 1) / kCopyChunk;
+    kept_before_chunk_.assign(chunks + 1, 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks), [&](const tbb::blocked_range<std::size_t>& block) {
+      for (std::size_t chunk = block.begin(); chunk < block.end(); ++chunk) {
+        const std::size_t end = std::min(map.points.size(), (chunk + 1) * kCopyChunk);
+        std::size_t count = 0;
+        for (std::size_t i = chunk * kCopyChunk; i < end; ++i) count += kept(i);
+        kept_before_chunk_[chunk + 1] = count;
+      }
+    });
+    for (std::size_t chunk = 0; chunk < chunks; ++chunk) kept_before_chunk_[chunk + 1] += kept_before_chunk_[chunk];
+    level.points.resize(kept_before_chunk_.back());
+    level.normals.resize(kept_before_chunk_.back());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks), [&](const tbb::blocked_range<std::size_t>& block) {
+      for (std::size_t chunk = block.begin(); chunk < block.end(); ++chunk) {
+        const std::size_t end = std::min(map.points.size(), (chunk + 1) * kCopyChunk);
+        std::size_t next = kept_before_chunk_[chunk];
+        for (std::size_t i = chunk * kCopyChunk; i < end; ++i) {
+          if (!kept(i)) continue;
+          level.points[next] = map.points[i];
+          level.normals[next] = map.normals[i];
+          ++next;
+        }
+      }
+    });
   }
   // The scene's scale: the median of every kRangeSampleStep-th point's range.
   constexpr std::size_t kRangeSampleStep = 16;
@@ -200,6 +224,40 @@ void moveAndBin(const float* points, std::size_t count, const float* transform, 
 
 }  // namespace
 
+void LocalModel::PartitionOrder::sort(const std::vector<uint8_t>& partitions) {
+  // Each chunk's count per map, then each map's numbers chunk by chunk: the
+  // same order as one pass over them would give.
+  constexpr std::size_t kChunk = 8192;
+  const std::size_t chunks = (partitions.size() + kChunk - 1) / kChunk;
+  chunk_counts.assign(chunks * kVoxelPartitions, 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks), [&](const tbb::blocked_range<std::size_t>& block) {
+    for (std::size_t chunk = block.begin(); chunk < block.end(); ++chunk) {
+      uint32_t* counts = &chunk_counts[chunk * kVoxelPartitions];
+      const std::size_t end = std::min(partitions.size(), (chunk + 1) * kChunk);
+      for (std::size_t i = chunk * kChunk; i < end; ++i) ++counts[partitions[i]];
+    }
+  });
+  uint32_t next = 0;
+  for (std::size_t partition = 0; partition < kVoxelPartitions; ++partition) {
+    first[partition] = next;
+    for (std::size_t chunk = 0; chunk < chunks; ++chunk) {
+      uint32_t& count = chunk_counts[chunk * kVoxelPartitions + partition];
+      const uint32_t in_chunk = count;
+      count = next;  // now where the chunk's first number of this map goes
+      next += in_chunk;
+    }
+  }
+  first[kVoxelPartitions] = next;
+  order.resize(partitions.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks), [&](const tbb::blocked_range<std::size_t>& block) {
+    for (std::size_t chunk = block.begin(); chunk < block.end(); ++chunk) {
+      uint32_t* places = &chunk_counts[chunk * kVoxelPartitions];
+      const std::size_t end = std::min(partitions.size(), (chunk + 1) * kChunk);
+      for (std::size_t i = chunk * kChunk; i < end; ++i) order[places[partitions[i]]++] = uint32_t(i);
+    }
+  });
+}
+
 // The neighbourhood of a point is the block of 3 x 3 x 3 voxels around its
 // voxel (in the newest keyframe's frame), 2 normal_radius_m wide: every point
 // of a voxel shares it, so the plane is fitted once per voxel of the newest
@@ -241,15 +299,16 @@ void LocalModel::computeModelNormals() {
                                    &partition_of_point_[first + i]);
                       });
   }
-  for (std::vector<uint32_t>& points : points_of_partition_) points.clear();
-  for (std::size_t i = 0; i < moved_points_.size(); ++i) points_of_partition_[partition_of_point_[i]].push_back(uint32_t(i));
+  points_by_partition_.sort(partition_of_point_);
   tbb::parallel_for(std::size_t(0), kVoxelPartitions, [&](std::size_t partition) {
     VoxelMap& voxels = model_voxels_[partition];
     voxels.clear();
     VoxelMoments* moments = nullptr;  // valid until the next insertion, which looks up again
     VoxelKey last_key = VoxelKey::Zero();
     Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-    for (const uint32_t i : points_of_partition_[partition]) {
+    const PartitionOrder& sorted = points_by_partition_;
+    for (uint32_t n = sorted.first[partition]; n < sorted.first[partition + 1]; ++n) {
+      const uint32_t i = sorted.order[n];
       const Eigen::Vector3f& moved = moved_points_[i];
       const VoxelKey& key = key_of_point_[i];
       if (!moments || key != last_key) {
@@ -275,35 +334,70 @@ void LocalModel::computeModelNormals() {
     const auto found = voxels.find(key, hash);
     return found == voxels.end() ? nullptr : &found->second;
   };
-  // The newest keyframe's voxels (of every level's points) that hold points;
-  // a run of points in one voxel takes one look-up, and the finest level's
-  // voxels are those its points were summed in (the last keyframe's above).
-  slot_of_voxel_.clear();
-  newest_voxels_.clear();
-  slot_of_point_.clear();
+  // The newest keyframe's voxels (of every level's points) that hold points,
+  // found map by map in parallel (a run of points in one voxel takes one
+  // look-up); the finest level's voxels and maps are those its points were
+  // summed in (the last keyframe's above). Which slot a voxel gets does not
+  // change its plane.
   const std::size_t newest_first = moved_points_.size() - newest.levels.back().points.size();
+  std::size_t newest_count = 0;
+  for (const Level& level : newest.levels) newest_count += level.points.size();
+  newest_keys_.resize(newest_count);
+  newest_partitions_.resize(newest_count);
+  slot_of_point_.resize(newest_count);
+  std::size_t level_first = 0;
   for (const Level& level : newest.levels) {
     const bool finest = &level == &newest.levels.back();
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, level.points.size(), 4096),
+                      [&](const tbb::blocked_range<std::size_t>& block) {
+                        for (std::size_t i = block.begin(); i < block.end(); ++i) {
+                          if (finest) {
+                            newest_keys_[level_first + i] = key_of_point_[newest_first + i];
+                            newest_partitions_[level_first + i] = partition_of_point_[newest_first + i];
+                          } else {
+                            const VoxelKey key = keyOf(level.points[i]);
+                            newest_keys_[level_first + i] = key;
+                            newest_partitions_[level_first + i] = partitionOfHash(LatticeKeyHash()(key));
+                          }
+                        }
+                      });
+    level_first += level.points.size();
+  }
+  newest_by_partition_.sort(newest_partitions_);
+  tbb::parallel_for(std::size_t(0), kVoxelPartitions, [&](std::size_t partition) {
+    VoxelMap& voxels = model_voxels_[partition];
+    std::vector<VoxelKey>& slots = newest_voxels_of_partition_[partition];
+    slots.clear();
+    const PartitionOrder& sorted = newest_by_partition_;
     VoxelKey last_key = VoxelKey::Zero();
     uint32_t slot = kNoVoxel;
-    for (std::size_t i = 0; i < level.points.size(); ++i) {
-      const VoxelKey key = finest ? key_of_point_[newest_first + i] : keyOf(level.points[i]);
-      if (i == 0 || key != last_key) {
+    for (uint32_t n = sorted.first[partition]; n < sorted.first[partition + 1]; ++n) {
+      const uint32_t i = sorted.order[n];
+      const VoxelKey& key = newest_keys_[i];
+      if (n == sorted.first[partition] || key != last_key) {
         last_key = key;
-        const auto found = slot_of_voxel_.find(key);
-        if (found != slot_of_voxel_.end()) {
-          slot = found->second;
-        } else if (findVoxel(key)) {
-          slot = uint32_t(newest_voxels_.size());
-          slot_of_voxel_.emplace(key, slot);
-          newest_voxels_.push_back(key);
-        } else {
+        const auto found = voxels.find(key);
+        if (found == voxels.end()) {
           slot = kNoVoxel;
+        } else {
+          VoxelMoments& moments = found.value();
+          if (moments.slot == kNoVoxel) {
+            moments.slot = uint32_t(slots.size());
+            slots.push_back(key);
+          }
+          slot = moments.slot;
         }
       }
-      slot_of_point_.push_back(slot);
+      slot_of_point_[i] = slot;  // within the map's slots
     }
-  }
+  });
+  first_slot_[0] = 0;
+  for (std::size_t partition = 0; partition < kVoxelPartitions; ++partition)
+    first_slot_[partition + 1] = first_slot_[partition] + uint32_t(newest_voxels_of_partition_[partition].size());
+  newest_voxels_.resize(first_slot_.back());
+  for (std::size_t partition = 0; partition < kVoxelPartitions; ++partition)
+    std::copy(newest_voxels_of_partition_[partition].begin(), newest_voxels_of_partition_[partition].end(),
+              newest_voxels_.begin() + first_slot_[partition]);
 
   // Each of its voxels' plane over the block.
   const double min_span_squared = (kMinSpan * options_.normal_radius_m) * (kMinSpan * options_.normal_radius_m);
@@ -360,7 +454,7 @@ void LocalModel::computeModelNormals() {
                         for (std::size_t i = block.begin(); i < block.end(); ++i) {
                           const uint32_t slot = slot_of_point_[first + i];
                           if (slot == kNoVoxel) continue;
-                          const Eigen::Vector3f& normal = slot_normals_[slot];
+                          const Eigen::Vector3f& normal = slot_normals_[first_slot_[newest_partitions_[first + i]] + slot];
                           const Eigen::Vector3f& point = level.points[i];
                           if (normal.allFinite())
                             level.normals[i] = normal.dot(point) > 0.0f ? Eigen::Vector3f(-normal) : normal;

@@ -17,6 +17,7 @@
 #include <array>
 #include <cstdint>
 #include <deque>
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -109,6 +110,7 @@ class LocalModel {
     double median_range_m = 0.0;  // of the finest level's points
   };
   std::vector<float> ranges_;  // add: a sample of the finest level's ranges
+  std::vector<std::size_t> kept_before_chunk_;  // add: pixels kept before each chunk of a level
   // normal_radius_m > 0: the newest keyframe's normals from the model's points.
   void computeModelNormals();
 
@@ -121,21 +123,38 @@ class LocalModel {
     double count = 0.0;
     Eigen::Vector3d sum = Eigen::Vector3d::Zero();
     Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();  // sum of d d^T, lower triangle
+    // Its number among its map's voxels of the newest keyframe; none (max) if not one.
+    uint32_t slot = std::numeric_limits<uint32_t>::max();
   };
   using VoxelKey = LatticeKey;
+  // Numbers 0..n-1 sorted by their map (a counting sort by fixed chunks, in
+  // parallel): map p's in order[first[p], first[p + 1]), in increasing order.
+  struct PartitionOrder {
+    std::vector<uint32_t> order;
+    std::array<uint32_t, kVoxelPartitions + 1> first{};
+    std::vector<uint32_t> chunk_counts;
+    void sort(const std::vector<uint8_t>& partitions);
+  };
   using VoxelMap = tsl::robin_map<VoxelKey, VoxelMoments, LatticeKeyHash>;
   std::array<VoxelMap, kVoxelPartitions> model_voxels_;
   // Those points (all keyframes, oldest first), their voxels and maps, and
-  // each map's points in that order.
+  // the points' numbers by map (map by map, each in the points' order).
   std::vector<Eigen::Vector3f> moved_points_;
   std::vector<VoxelKey> key_of_point_;
   std::vector<uint8_t> partition_of_point_;
-  std::array<std::vector<uint32_t>, kVoxelPartitions> points_of_partition_;
-  // The newest keyframe's voxels, each level's points' voxel (concatenated),
-  // and each voxel's plane normal (NaN where the block is no plane).
-  tsl::robin_map<VoxelKey, uint32_t, LatticeKeyHash> slot_of_voxel_;
-  std::vector<VoxelKey> newest_voxels_;
+  PartitionOrder points_by_partition_;
+  // The newest keyframe's points of every level (concatenated): their
+  // voxels, maps and order by map, and their voxel's slot in its map.
+  std::vector<VoxelKey> newest_keys_;
+  std::vector<uint8_t> newest_partitions_;
+  PartitionOrder newest_by_partition_;
   std::vector<uint32_t> slot_of_point_;
+  // The newest keyframe's voxels, map by map (map p's slots from
+  // first_slot_[p]), and each one's plane normal (NaN where the block is no
+  // plane).
+  std::array<std::vector<VoxelKey>, kVoxelPartitions> newest_voxels_of_partition_;
+  std::array<uint32_t, kVoxelPartitions + 1> first_slot_{};
+  std::vector<VoxelKey> newest_voxels_;
   std::vector<Eigen::Vector3f> slot_normals_;
   // Per level pixel: the nearest range's bits, then the winning point's
   // number (atomic compare-and-swap minimums); per point its pixel and range.
