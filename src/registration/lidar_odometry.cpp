@@ -396,10 +396,14 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
   // The pixels the registration may pair: with a normal, or, where the
   // model's normals pair them too, every pixel with a point.
   const bool pairs_without_normals = icp_.pairsSourceWithoutNormals();
-  update.valid_pixels = 0;
-  for (std::size_t i = 0; i < deskewed_.points.size(); ++i)
-    update.valid_pixels +=
-        deskewed_.points[i].allFinite() && (pairs_without_normals || deskewed_.normals[i].allFinite());
+  update.valid_pixels = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, deskewed_.points.size(), 16384), std::size_t(0),
+      [&](const tbb::blocked_range<std::size_t>& block, std::size_t count) {
+        for (std::size_t i = block.begin(); i < block.end(); ++i)
+          count += deskewed_.points[i].allFinite() && (pairs_without_normals || deskewed_.normals[i].allFinite());
+        return count;
+      },
+      std::plus<>());
   moving_.assign(deskewed_.points.size(), 0);
   stale_.assign(deskewed_.points.size(), 0);
   if (update.degenerate) model_disagreement_.clear();
@@ -497,8 +501,19 @@ const VertexNormalMap& LidarOdometry::sourceWithoutMoving() {
   std::size_t first = 0;
   while (first < size && !marked(first)) ++first;
   if (first == size) return measured_;
-  source_ = measured_;
   const int rows = measured_.rows, columns = measured_.columns;
+  // The copy in parallel, then the few marked pixels' neighbourhoods cleared.
+  source_.rows = rows;
+  source_.columns = columns;
+  source_.stride = measured_.stride;
+  source_.points.resize(size);
+  source_.normals.resize(size);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, size, 16384), [&](const tbb::blocked_range<std::size_t>& block) {
+    std::copy(measured_.points.begin() + block.begin(), measured_.points.begin() + block.end(),
+              source_.points.begin() + block.begin());
+    std::copy(measured_.normals.begin() + block.begin(), measured_.normals.begin() + block.end(),
+              source_.normals.begin() + block.begin());
+  });
   for (int row = int(first / std::size_t(columns)); row < rows; ++row)
     for (int column = 0; column < columns; ++column) {
       if (!marked(std::size_t(row) * columns + column)) continue;
@@ -584,16 +599,21 @@ std::size_t LidarOdometry::classifyMoving(const LidarModel& model, const Eigen::
   // uncovered edges of static objects move across the image with the sensor.
   // The same two-scan rule for pixels a little in front of the model.
   if (model_disagreement_.size() != size) model_disagreement_.assign(size, 0);
-  std::size_t moving_twice = 0;
-  for (std::size_t i = 0; i < size; ++i) {
-    const uint8_t now = (stale_[i] ? kBehindModel : 0) | (moving_[i] ? kInFrontOfModel : 0);
-    stale_[i] = stale_[i] && (model_disagreement_[i] & kBehindModel);
-    if (moving_[i] == kInFrontOnce) {
-      moving_[i] = (model_disagreement_[i] & kInFrontOfModel) ? 1 : 0;
-      moving_twice += moving_[i];
-    }
-    model_disagreement_[i] = now;
-  }
+  const std::size_t moving_twice = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, size, 16384), std::size_t(0),
+      [&](const tbb::blocked_range<std::size_t>& block, std::size_t count) {
+        for (std::size_t i = block.begin(); i < block.end(); ++i) {
+          const uint8_t now = (stale_[i] ? kBehindModel : 0) | (moving_[i] ? kInFrontOfModel : 0);
+          stale_[i] = stale_[i] && (model_disagreement_[i] & kBehindModel);
+          if (moving_[i] == kInFrontOnce) {
+            moving_[i] = (model_disagreement_[i] & kInFrontOfModel) ? 1 : 0;
+            count += moving_[i];
+          }
+          model_disagreement_[i] = now;
+        }
+        return count;
+      },
+      std::plus<>());
   return moving + moving_twice;
 }
 

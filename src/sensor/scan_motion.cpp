@@ -1,5 +1,8 @@
 #include "range_image_mapping/scan_motion.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <cmath>
 
 namespace range_image_mapping {
@@ -107,11 +110,14 @@ bool computeColumnMotion(const RangeImage& scan, uint64_t scan_time_ns, const Tw
   const int columns = scan.columns();
   if (twist.isZero() || scan.column_timestamp_ns.size() != std::size_t(columns)) return false;
   motion.resize(columns);
-  for (int u = 0; u < columns; ++u) {
-    const uint64_t time = scan.column_timestamp_ns[u];
-    const double offset = time == 0 ? 0.0 : (double(time) - double(scan_time_ns)) * 1e-9;
-    motion[u] = twistExponential(offset * twist).matrix().topRows<3>().cast<float>();
-  }
+  // Each column on its own (the odometry asks for them on every deskew pass).
+  tbb::parallel_for(tbb::blocked_range<int>(0, columns, 64), [&](const tbb::blocked_range<int>& block) {
+    for (int u = block.begin(); u < block.end(); ++u) {
+      const uint64_t time = scan.column_timestamp_ns[u];
+      const double offset = time == 0 ? 0.0 : (double(time) - double(scan_time_ns)) * 1e-9;
+      motion[u] = twistExponential(offset * twist).matrix().topRows<3>().cast<float>();
+    }
+  });
   return true;
 }
 
