@@ -503,32 +503,39 @@ void LocalModel::render(const LidarModel& model, const Eigen::Isometry3d& odom_f
     // Pass 1: every point's pixel and range, and each pixel's nearest range.
     // Points without a normal take part in the z-buffer (they occlude) but
     // cannot win a pixel: they get no pixel for pass 2.
-    for (std::size_t k = 0; k < keyframes_.size(); ++k) {
-      const Level& points = keyframe(k).levels[l];
-      const Eigen::Isometry3f& view_from_keyframe = view_from_keyframe_[k];
-      const std::size_t first = first_point_[k];
-      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.points.size(), kChunk),
-                        [&](const tbb::blocked_range<std::size_t>& block) {
-                          ChunkBuffers chunk;
-                          const std::size_t n = block.size();
-                          if (n == 0) return;  // never; tells the compiler the arrays are set before projectMany
-                          transformToArrays(points.points[block.begin()].data(), n, view_from_keyframe.matrix().data(),
+    // All keyframes' chunks in one parallel loop (the coarse levels have few
+    // points each).
+    first_chunk_.assign(keyframes_.size() + 1, 0);
+    for (std::size_t k = 0; k < keyframes_.size(); ++k)
+      first_chunk_[k + 1] = first_chunk_[k] + (keyframe(k).levels[l].points.size() + kChunk - 1) / kChunk;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, first_chunk_.back(), 1),
+                      [&](const tbb::blocked_range<std::size_t>& chunks) {
+                        ChunkBuffers chunk;
+                        for (std::size_t c = chunks.begin(); c < chunks.end(); ++c) {
+                          std::size_t k = 0;
+                          while (c >= first_chunk_[k + 1]) ++k;
+                          const Level& points = *level_points_[k];
+                          const std::size_t begin = (c - first_chunk_[k]) * kChunk;
+                          const std::size_t n = std::min(kChunk, points.points.size() - begin);
+                          const std::size_t first = first_point_[k];
+                          if (n == 0) continue;  // never; tells the compiler the arrays are set before projectMany
+                          transformToArrays(points.points[begin].data(), n, view_from_keyframe_[k].matrix().data(),
                                             chunk.x, chunk.y, chunk.z);
                           model.projectMany(chunk.x, chunk.y, chunk.z, n, chunk.pixels, chunk.hits);
                           for (std::size_t i = 0; i < n; ++i) {
-                            const std::size_t number = first + block.begin() + i;
+                            const std::size_t number = first + begin + i;
                             if (!chunk.hits[i]) {
                               pixel_of_point_[number] = kNoPoint;
                               continue;
                             }
                             const uint32_t pixel = uint32_t(pixel_tables_.index(chunk.pixels[i]));
-                            const bool has_normal = std::isfinite(points.normals[block.begin() + i].x());
+                            const bool has_normal = std::isfinite(points.normals[begin + i].x());
                             pixel_of_point_[number] = has_normal ? pixel : kNoPoint;
                             range_of_point_[number] = chunk.pixels[i].range;
                             keepSmallest(nearest[pixel], rangeBits(chunk.pixels[i].range));
                           }
-                        });
-    }
+                        }
+                      });
     // Pass 2: of the points on the nearest surface, the newest keyframe's.
     // The nearest point itself would be biased towards the sensor by the
     // noise: the least of several noisy ranges of one surface.

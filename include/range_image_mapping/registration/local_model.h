@@ -162,6 +162,7 @@ class LocalModel {
   mutable std::vector<uint32_t> pixel_of_point_;
   mutable std::vector<float> range_of_point_;
   mutable std::vector<std::size_t> first_point_;  // per keyframe, newest first, of the level rendered
+  mutable std::vector<std::size_t> first_chunk_;  // the same, of render's chunks of points
   mutable std::vector<Eigen::Isometry3f> view_from_keyframe_;  // the same order
   mutable std::vector<const Level*> level_points_;  // the same order, of the level rendered
   mutable LevelPixelTables pixel_tables_;  // of the level rendered
