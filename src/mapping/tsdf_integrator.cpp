@@ -394,6 +394,8 @@ struct TsdfIntegrator::Workspace {
   std::vector<CellMask> touched_cells;     // per touched block: its activated cells
   std::vector<uint8_t> created;            // per touched block
   std::vector<ActivatedBlock> activated;    // the blocks the scan's cells fall in, nearest first
+  std::vector<VoxelBlock*> new_blocks;     // for touched_keys_: the blocks not in the grid before
+  std::vector<uint8_t> new_created;
   std::vector<uint32_t> integration_order; // touched blocks by azimuth
   std::vector<float> azimuth;              // per touched block, in the lidar frame
   std::vector<uint32_t> voxels_updated;    // per touched block
@@ -872,14 +874,25 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
                         entry.azimuth = float(std::atan2(centre.y(), centre.x()));
                       }
                     });
+  touched_keys_.clear();
+  if (adding)
+    for (const ActivatedBlock& entry : activated)
+      if (entry.block == nullptr) touched_keys_.push_back(entry.key);
+  work.new_blocks.resize(touched_keys_.size());
+  work.new_created.resize(touched_keys_.size());
+  grid.activateMany(touched_keys_.data(), touched_keys_.size(), work.new_blocks.data(), work.new_created.data());
   touched_blocks_.clear();
   work.created.clear();
   work.touched_cells.clear();
   work.azimuth.clear();
+  std::size_t next_new = 0;
   for (const ActivatedBlock& entry : activated) {
     bool created = false;
     VoxelBlock* block = entry.block;
-    if (block == nullptr && adding) block = grid.activate(entry.key, &created);
+    if (block == nullptr && adding) {
+      created = work.new_created[next_new];
+      block = work.new_blocks[next_new++];
+    }
     if (block == nullptr) {
       // Removing: a block that is not there holds nothing to remove.
       if (adding) ++statistics.blocks_refused;
