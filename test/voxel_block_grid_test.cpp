@@ -9,6 +9,7 @@
 #include <cmath>
 #include <limits>
 #include <set>
+#include <vector>
 
 namespace range_image_mapping::mapping {
 namespace {
@@ -104,6 +105,49 @@ TEST(VoxelBlockGrid, MemoryBudgetRefusesNewBlocksAndKeepsTheOthers) {
   EXPECT_TRUE(grid.remove(BlockKey(0, 0, 0)));
   EXPECT_FALSE(grid.remove(BlockKey(0, 0, 0)));
   EXPECT_NE(grid.activate(BlockKey(10, 0, 0)), nullptr);
+}
+
+TEST(VoxelBlockGrid, ActivatingManyIsActivatingEachInTurn) {
+  // Two grids with the same history (a budget, a removed block whose slot and
+  // arrays are reused, intensity): activateMany must give each key the block,
+  // slot, creation flag, refusal and cleared arrays that activate() would.
+  VoxelBlockGridOptions options = gridOptions(0.1, 8, 7);
+  options.store_intensity = true;
+  VoxelBlockGrid one_by_one(options), together(options);
+  for (VoxelBlockGrid* grid : {&one_by_one, &together}) {
+    for (int n = 0; n < 4; ++n) grid->activate(BlockKey(n, 0, 0))->weight[5] = 2.0f;
+    grid->activate(BlockKey(2, 0, 0))->sdf[7] = 0.5f;
+    ASSERT_TRUE(grid->remove(BlockKey(1, 0, 0)));  // its slot (and arrays) go to the next new block
+  }
+  const std::vector<BlockKey> keys{BlockKey(9, 1, 0), BlockKey(2, 0, 0),  BlockKey(-3, 4, 5), BlockKey(0, 0, 0),
+                                   BlockKey(7, 7, 7), BlockKey(8, -1, 2), BlockKey(6, 6, 6)};
+  std::vector<VoxelBlock*> expected, blocks(keys.size());
+  std::vector<uint8_t> expected_created, created(keys.size(), 2);
+  for (const BlockKey& key : keys) {
+    bool is_new = false;
+    expected.push_back(one_by_one.activate(key, &is_new));
+    expected_created.push_back(is_new);
+  }
+  together.activateMany(keys.data(), keys.size(), blocks.data(), created.data());
+  std::vector<const VoxelBlock*> all_expected = const_cast<const VoxelBlockGrid&>(one_by_one).blocks();
+  std::vector<const VoxelBlock*> all = const_cast<const VoxelBlockGrid&>(together).blocks();
+  ASSERT_EQ(all.size(), all_expected.size());
+  EXPECT_EQ(together.blockCount(), 7u);  // the budget refused the last two new keys
+  for (std::size_t n = 0; n < keys.size(); ++n) {
+    EXPECT_EQ(int(created[n]), int(expected_created[n])) << n;
+    ASSERT_EQ(blocks[n] == nullptr, expected[n] == nullptr) << n;
+    if (!blocks[n]) continue;
+    EXPECT_EQ(blocks[n]->key, keys[n]);
+    EXPECT_EQ(blocks[n]->sdf, expected[n]->sdf) << n;
+    EXPECT_EQ(blocks[n]->weight, expected[n]->weight) << n;
+    EXPECT_EQ(blocks[n]->intensity, expected[n]->intensity) << n;
+    EXPECT_EQ(blocks[n]->changed_generation, expected[n]->changed_generation) << n;
+  }
+  EXPECT_EQ(blocks[1]->sdf[7], 0.5f);  // an existing block is kept as it is
+  EXPECT_EQ(blocks[0]->weight[5], 0.0f);  // a new one in a reused slot is cleared
+  EXPECT_EQ(blocks[0]->sdf.size(), 512u);
+  // The same slots: the grids list their blocks in the same order.
+  for (std::size_t n = 0; n < all.size(); ++n) EXPECT_EQ(all[n]->key, all_expected[n]->key) << n;
 }
 
 TEST(VoxelBlockGrid, RemovesExactlyTheBlocksBeyondTheRadius) {

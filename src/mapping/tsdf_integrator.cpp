@@ -6,6 +6,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 #include <tsl/robin_map.h>
 
 #include <algorithm>
@@ -331,6 +332,16 @@ struct BlockBuffers {
   }
 };
 
+// A block some activated cell falls in: its squared distance from the sensor
+// (in blocks), its cells, the grid's block if it has it, its azimuth.
+struct ActivatedBlock {
+  double distance;
+  BlockKey key;
+  CellMask cells;
+  VoxelBlock* block;
+  float azimuth;
+};
+
 void requireFiniteOption(double value, const char* field) {
   if (!std::isfinite(value)) throw MappingError(std::string(field) + " must be finite, got " + numberText(value));
 }
@@ -382,12 +393,16 @@ struct TsdfIntegrator::Workspace {
   ActivationCells cells;
   std::vector<CellMask> touched_cells;     // per touched block: its activated cells
   std::vector<uint8_t> created;            // per touched block
+  std::vector<ActivatedBlock> activated;    // the blocks the scan's cells fall in, nearest first
+  std::vector<VoxelBlock*> new_blocks;     // for touched_keys_: the blocks not in the grid before
+  std::vector<uint8_t> new_created;
   std::vector<uint32_t> integration_order; // touched blocks by azimuth
   std::vector<float> azimuth;              // per touched block, in the lidar frame
   std::vector<uint32_t> voxels_updated;    // per touched block
   std::vector<uint32_t> voxels_selected;   // per touched block
   std::vector<float> block_drift;          // per touched block: largest |sdf change| of a voxel
   std::vector<uint8_t> block_topology;     // per touched block: a voxel's sign or observation changed
+  std::vector<uint8_t> block_observed;     // per touched block: some voxel has weight > 0
   std::vector<ColumnMotion> column_motion_inverse;  // scan-time frame -> column-time frame
   std::vector<float> column_time;                   // seconds after the scan time
   std::vector<float> sample_weight;        // per pixel; empty: every sample weighs 1
@@ -830,25 +845,54 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
   work.merged_blocks.clear();
   for (const BlockCells& blocks : work.thread_blocks)
     for (const auto& [key, mask] : blocks) work.merged_blocks[key] |= mask;
-  touched_keys_.clear();
-  for (const auto& entry : work.merged_blocks) touched_keys_.push_back(entry.first);
   // Nearest blocks first, so that a memory budget running out keeps the
   // sensor's surroundings; ties broken by key so that the order (and the
-  // grid's pool slots) does not depend on the threads.
+  // grid's pool slots) does not depend on the threads. A strict order on
+  // distinct keys: any sort gives the same sequence.
   const Eigen::Vector3d sensor_in_blocks = world_from_lidar.translation() / block_size -
                                            Eigen::Vector3d::Constant(0.5);
-  std::sort(touched_keys_.begin(), touched_keys_.end(), [&](const BlockKey& a, const BlockKey& b) {
-    const double distance_a = (a.cast<double>() - sensor_in_blocks).squaredNorm();
-    const double distance_b = (b.cast<double>() - sensor_in_blocks).squaredNorm();
-    if (distance_a != distance_b) return distance_a < distance_b;
-    return std::lexicographical_compare(a.data(), a.data() + 3, b.data(), b.data() + 3);
+  std::vector<ActivatedBlock>& activated = work.activated;
+  activated.clear();
+  for (const auto& [key, mask] : work.merged_blocks)
+    activated.push_back({(key.cast<double>() - sensor_in_blocks).squaredNorm(), key, mask, nullptr, 0.0f});
+  tbb::parallel_sort(activated.begin(), activated.end(), [](const ActivatedBlock& a, const ActivatedBlock& b) {
+    if (a.distance != b.distance) return a.distance < b.distance;
+    return std::lexicographical_compare(a.key.data(), a.key.data() + 3, b.key.data(), b.key.data() + 3);
   });
+  // The blocks already in the grid are looked up in parallel (finds only);
+  // the new ones are then created in that order, on one thread. Each block's
+  // azimuth in the lidar frame too, for the integration order below.
+  const Eigen::Isometry3d lidar_from_world = world_from_lidar.inverse();
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, activated.size(), 256),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      for (std::size_t n = range.begin(); n != range.end(); ++n) {
+                        ActivatedBlock& entry = activated[n];
+                        entry.block = grid.find(entry.key);
+                        const Eigen::Vector3d centre =
+                            lidar_from_world * (grid.voxelPosition(entry.key, 0, 0, 0) +
+                                                Eigen::Vector3d::Constant(0.5 * block_size));
+                        entry.azimuth = float(std::atan2(centre.y(), centre.x()));
+                      }
+                    });
+  touched_keys_.clear();
+  if (adding)
+    for (const ActivatedBlock& entry : activated)
+      if (entry.block == nullptr) touched_keys_.push_back(entry.key);
+  work.new_blocks.resize(touched_keys_.size());
+  work.new_created.resize(touched_keys_.size());
+  grid.activateMany(touched_keys_.data(), touched_keys_.size(), work.new_blocks.data(), work.new_created.data());
   touched_blocks_.clear();
   work.created.clear();
   work.touched_cells.clear();
-  for (const BlockKey& key : touched_keys_) {
+  work.azimuth.clear();
+  std::size_t next_new = 0;
+  for (const ActivatedBlock& entry : activated) {
     bool created = false;
-    VoxelBlock* block = adding ? grid.activate(key, &created) : grid.find(key);
+    VoxelBlock* block = entry.block;
+    if (block == nullptr && adding) {
+      created = work.new_created[next_new];
+      block = work.new_blocks[next_new++];
+    }
     if (block == nullptr) {
       // Removing: a block that is not there holds nothing to remove.
       if (adding) ++statistics.blocks_refused;
@@ -856,7 +900,8 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
     }
     touched_blocks_.push_back(block);
     work.created.push_back(created);
-    work.touched_cells.push_back(work.merged_blocks.find(key)->second);
+    work.touched_cells.push_back(entry.cells);
+    work.azimuth.push_back(entry.azimuth);
   }
   statistics.activation_seconds = secondsSince(activation_start);
 
@@ -864,7 +909,6 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
   // (eq. 8), d = Omega(u, v) - r (eq. 9), averaged (eq. 10). One block per
   // task, so no two threads write one voxel.
   const Clock::time_point integration_start = Clock::now();
-  const Eigen::Isometry3d lidar_from_world = world_from_lidar.inverse();
   const Eigen::Matrix3f lattice_steps = (lidar_from_world.linear() * grid.voxelSize()).cast<float>();
   const int edge = grid.blockEdge();
   const std::size_t voxels = static_cast<std::size_t>(grid.voxelsPerBlock());
@@ -875,6 +919,7 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
   work.voxels_selected.assign(touched_blocks_.size(), 0);
   work.block_drift.assign(touched_blocks_.size(), 0.0f);
   work.block_topology.assign(touched_blocks_.size(), 0);
+  work.block_observed.assign(touched_blocks_.size(), 1);
   const float mesh_min_weight = options_.mesh_min_weight;
   const float free_space_weight = options_.free_space_weight;
   const PixelPlane* planes = point_to_plane ? work.pixel_planes.data() : nullptr;
@@ -886,18 +931,12 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
   const float* intensities = with_intensity ? scan.intensity.data() : nullptr;
   const float* sample_weights = weighted ? work.sample_weight.data() : nullptr;
   // Blocks in azimuth order: neighbouring blocks of one task read
-  // neighbouring pixels, which stay in cache.
+  // neighbouring pixels, which stay in cache (ties by index: one order).
   work.integration_order.resize(touched_blocks_.size());
-  work.azimuth.resize(touched_blocks_.size());
-  for (std::size_t b = 0; b < touched_blocks_.size(); ++b) {
-    const Eigen::Vector3d centre =
-        lidar_from_world * (grid.voxelPosition(touched_blocks_[b]->key, 0, 0, 0) +
-                            Eigen::Vector3d::Constant(0.5 * grid.blockSize()));
-    work.azimuth[b] = float(std::atan2(centre.y(), centre.x()));
-    work.integration_order[b] = uint32_t(b);
-  }
-  std::sort(work.integration_order.begin(), work.integration_order.end(),
-            [&](uint32_t a, uint32_t b) { return work.azimuth[a] < work.azimuth[b]; });
+  for (std::size_t b = 0; b < touched_blocks_.size(); ++b) work.integration_order[b] = uint32_t(b);
+  tbb::parallel_sort(work.integration_order.begin(), work.integration_order.end(), [&](uint32_t a, uint32_t b) {
+    return work.azimuth[a] < work.azimuth[b] || (work.azimuth[a] == work.azimuth[b] && a < b);
+  });
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, touched_blocks_.size(), 1),
                     [&](const tbb::blocked_range<std::size_t>& range) {
     BlockBuffers& buffers = work.thread_buffers.local();
@@ -1031,6 +1070,10 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
       work.voxels_selected[b] = uint32_t(count);
       work.block_drift[b] = write.drift;
       work.block_topology[b] = write.topology;
+      // Only a new block, or one a scan was removed from, may hold no
+      // observation now (it goes below); checked here, in parallel.
+      if (work.created[b] || !adding)
+        work.block_observed[b] = std::any_of(weight, weight + voxels, [](float w) { return w > 0.0f; });
     }
   });
 
@@ -1044,9 +1087,7 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
     VoxelBlock& block = *touched_blocks_[b];
     statistics.voxels_updated += work.voxels_updated[b];
     statistics.voxels_selected += work.voxels_selected[b];
-    const bool may_be_empty = work.created[b] || !adding;
-    if (may_be_empty &&
-        std::none_of(block.weight.begin(), block.weight.end(), [](float w) { return w > 0.0f; })) {
+    if ((work.created[b] || !adding) && !work.block_observed[b]) {
       grid.remove(block.key);
       if (mesh_tolerance > 0.0f) drift_since_marked.erase(block.key);
       if (!adding) ++statistics.blocks_removed;

@@ -2,6 +2,8 @@
 
 #include "number_text.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 #include <tsl/robin_map.h>
 
 #include <cmath>
@@ -74,7 +76,29 @@ Eigen::Vector3d VoxelBlockGrid::voxelPosition(const BlockKey& key, int i, int j,
 }
 
 VoxelBlock* VoxelBlockGrid::activate(const BlockKey& key, bool* created) {
-  if (created) *created = false;
+  bool is_new = false;
+  VoxelBlock* block = findOrAddSlot(key, &is_new);
+  if (is_new) clearArrays(*block);
+  if (created) *created = is_new;
+  return block;
+}
+
+void VoxelBlockGrid::activateMany(const BlockKey* keys, std::size_t count, VoxelBlock** blocks,
+                                  uint8_t* created) {
+  std::vector<VoxelBlock*> fresh;
+  for (std::size_t n = 0; n < count; ++n) {
+    bool is_new = false;
+    blocks[n] = findOrAddSlot(keys[n], &is_new);
+    created[n] = is_new;
+    if (is_new) fresh.push_back(blocks[n]);
+  }
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, fresh.size(), 16),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      for (std::size_t n = range.begin(); n != range.end(); ++n) clearArrays(*fresh[n]);
+                    });
+}
+
+VoxelBlock* VoxelBlockGrid::findOrAddSlot(const BlockKey& key, bool* created) {
   Storage& storage = *storage_;
   const auto found = storage.slots.find(key);
   if (found != storage.slots.end()) return &storage.pool[found->second];
@@ -88,18 +112,21 @@ VoxelBlock* VoxelBlockGrid::activate(const BlockKey& key, bool* created) {
     storage.pool.emplace_back();
   }
   VoxelBlock& block = storage.pool[slot];
-  const std::size_t voxels = static_cast<std::size_t>(voxelsPerBlock());
   block.key = key;
+  block.changed_generation = 0;
+  storage.slots.emplace(key, slot);
+  *created = true;
+  return &block;
+}
+
+void VoxelBlockGrid::clearArrays(VoxelBlock& block) const {
+  const std::size_t voxels = static_cast<std::size_t>(voxelsPerBlock());
   block.sdf.assign(voxels, 0.0f);
   block.weight.assign(voxels, 0.0f);
   if (options_.store_intensity)
     block.intensity.assign(voxels, 0.0f);
   else
     block.intensity.clear();
-  block.changed_generation = 0;
-  storage.slots.emplace(key, slot);
-  if (created) *created = true;
-  return &block;
 }
 
 VoxelBlock* VoxelBlockGrid::find(const BlockKey& key) {

@@ -168,7 +168,7 @@ class TsdfIntegrator {
   IntegrationStatistics update(VoxelBlockGrid& grid, const RangeImage& scan, const ScanPose& pose,
                                float sign, const VertexNormalMap* normals);
   TsdfIntegratorOptions options_;
-  // Reused between scans: the keys of the blocks this scan touches.
+  // Reused between scans: the keys of the blocks this scan creates.
   std::vector<BlockKey> touched_keys_;
   std::vector<VoxelBlock*> touched_blocks_;
   std::vector<ColumnMotion> column_motion_;

@@ -83,6 +83,12 @@ class VoxelBlockGrid {
   // Not thread-safe: activation is serial, integration into existing blocks
   // is parallel.
   VoxelBlock* activate(const BlockKey& key, bool* created = nullptr);
+  // activate() for count keys, in their order (the same slots, and the same
+  // refusals at max_blocks, as one call each): blocks[n] and created[n] for
+  // keys[n]. The new blocks' arrays are then zeroed in parallel: first
+  // writes to fresh memory cost a page fault per 4 KB, most of creating a
+  // block. Not thread-safe either (it runs its own parallel loop).
+  void activateMany(const BlockKey* keys, std::size_t count, VoxelBlock** blocks, uint8_t* created);
   VoxelBlock* find(const BlockKey& key);
   const VoxelBlock* find(const BlockKey& key) const;
 
@@ -111,6 +117,11 @@ class VoxelBlockGrid {
   uint64_t nextGeneration() { return ++generation_; }
 
  private:
+  // The block of key, or a slot taken for it (key set, arrays as the slot
+  // left them: *created is then true); nullptr at max_blocks.
+  VoxelBlock* findOrAddSlot(const BlockKey& key, bool* created);
+  // sdf = weight (= intensity) = 0, voxelsPerBlock() of each.
+  void clearArrays(VoxelBlock& block) const;
   struct Storage;
   VoxelBlockGridOptions options_;
   std::unique_ptr<Storage> storage_;
