@@ -207,15 +207,15 @@ class BlockMesher {
             if (vertex >= 0) return vertex;
             const CubeEdge& edge_of_cube = cases.edges()[cube_edge];
             const int c = edge_of_cube.lower_corner;
-            return newVertex(grid, block.key, cube + Eigen::Vector3i(c & 1, (c >> 1) & 1, c >> 2),
-                             edge_of_cube.axis, local_edge, chunk);
+            return newVertex(cube + Eigen::Vector3i(c & 1, (c >> 1) & 1, c >> 2), edge_of_cube.axis, local_edge);
           };
           int interior = -1;
           if (triangles.interior_loop_size > 0) {
-            loop_vertices_.clear();
+            const int loop_begin = int(loop_vertices_.size());
             for (int i = 0; i < triangles.interior_loop_size; ++i)
               loop_vertices_.push_back(vertexOnCubeEdge(triangles.interior_loop[i]));
-            interior = interiorVertex(block.key, cube, chunk);
+            interior = int(vertices_.size());
+            vertices_.push_back({cube, kInterior, loop_begin, triangles.interior_loop_size});
           }
           for (int t = 0; t < triangles.count; ++t) {
             Eigen::Vector3i triangle;
@@ -231,10 +231,22 @@ class BlockMesher {
       }
     for (int local_edge : vertex_local_edges_) vertex_of_edge_[local_edge] = -1;
     vertex_local_edges_.clear();
+    placeVertices(grid, block.key, chunk);
+    vertices_.clear();
+    loop_vertices_.clear();
     return chunk;
   }
 
  private:
+  // Per vertex of the current chunk, what placeVertices needs: the lower
+  // lattice point and axis of its edge, or (axis kInterior) its cube and its
+  // loop's vertices in loop_vertices_.
+  static constexpr int kInterior = 3;
+  struct VertexPlace {
+    Eigen::Vector3i point;
+    int axis, loop_begin, loop_size;
+  };
+
   int paddedIndex(int x, int y, int z) const { return x + row_ * (y + padded_ * z); }
 
   // Fills the padded arrays; false when the block cannot produce a triangle.
@@ -417,13 +429,44 @@ class BlockMesher {
 
   // The chunk's vertex on the lattice edge from `lower` (padded coordinates)
   // along `axis` (local_edge: axis + 3 * lattice index of `lower`), which
-  // has none yet.
-  int newVertex(const VoxelBlockGrid& grid, const BlockKey& key, const Eigen::Vector3i& lower, int axis,
-                int local_edge, MeshChunk& chunk) {
-    const int vertex = int(chunk.vertices.size());
+  // has none yet. Only its place in the chunk is decided here: placeVertices
+  // computes every vertex after the cube walk, in a loop whose iterations
+  // do not wait on one another (square roots and divisions overlap).
+  int newVertex(const Eigen::Vector3i& lower, int axis, int local_edge) {
+    const int vertex = int(vertices_.size());
     vertex_of_edge_[local_edge] = vertex;
     vertex_local_edges_.push_back(local_edge);
+    vertices_.push_back({lower, axis, 0, 0});
+    return vertex;
+  }
 
+  // Position, normal, intensity and name of every vertex of the chunk, in
+  // vertex order (an interior vertex comes after its loop's vertices).
+  void placeVertices(const VoxelBlockGrid& grid, const BlockKey& key, MeshChunk& chunk) {
+    const std::size_t count = vertices_.size();
+    chunk.vertices.resize(count);
+    chunk.normals.resize(count);
+    if (with_intensity_) chunk.intensities.resize(count);
+    chunk.vertex_edges.resize(count);
+    Eigen::Vector3f* const positions = chunk.vertices.data();
+    Eigen::Vector3f* const normals = chunk.normals.data();
+    float* const intensities = chunk.intensities.data();
+    LatticeEdge* const names = chunk.vertex_edges.data();
+    const double voxel_size = grid.voxelSize();
+    for (std::size_t v = 0; v < count; ++v) {
+      const VertexPlace& place = vertices_[v];
+      if (place.axis == kInterior)
+        interiorVertex(key, place, positions, normals, intensities, names, v);
+      else
+        edgeVertex(key, place.point, place.axis, voxel_size, positions[v], normals[v],
+                   with_intensity_ ? &intensities[v] : nullptr, names[v]);
+    }
+  }
+
+  // The vertex on the lattice edge from `lower` along `axis`.
+  void edgeVertex(const BlockKey& key, const Eigen::Vector3i& lower, int axis, double voxel_size,
+                  Eigen::Vector3f& position_out, Eigen::Vector3f& normal_out, float* intensity_out,
+                  LatticeEdge& name) {
     const Eigen::Vector3i upper = lower + Eigen::Vector3i::Unit(axis);
     const int lower_index = paddedIndex(lower.x(), lower.y(), lower.z());
     const int upper_index = lower_index + stride_[axis];
@@ -436,7 +479,7 @@ class BlockMesher {
         key.cast<int64_t>() * int64_t(edge_) + lower.cast<int64_t>();
     Eigen::Vector3d position = lattice.cast<double>();
     position[axis] += double(t);
-    chunk.vertices.push_back((position * grid.voxelSize()).cast<float>());
+    position_out = (position * voxel_size).cast<float>();
 
     Eigen::Vector3f normal = (1.0f - t) * gradient(lower) + t * gradient(upper);
     const float length = normal.norm();
@@ -444,14 +487,12 @@ class BlockMesher {
       normal /= length;
     else  // a flat or unobserved neighbourhood: the edge itself points to free space
       normal = Eigen::Vector3f::Unit(axis) * (upper_sdf > lower_sdf ? 1.0f : -1.0f);
-    chunk.normals.push_back(normal);
+    normal_out = normal;
 
-    if (with_intensity_)
-      chunk.intensities.push_back((1.0f - t) * intensity_[lower_index] + t * intensity_[upper_index]);
+    if (intensity_out) *intensity_out = (1.0f - t) * intensity_[lower_index] + t * intensity_[upper_index];
 
     // Name the edge by the block holding its lower end (a far-face edge
     // belongs to the +1 neighbour).
-    LatticeEdge name;
     Eigen::Vector3i voxel = lower;
     for (int a = 0; a < 3; ++a)
       if (voxel[a] == edge_) {
@@ -461,31 +502,28 @@ class BlockMesher {
         name.block[a] = key[a];
       }
     name.index = axis + 3 * (voxel.x() + edge_ * (voxel.y() + edge_ * voxel.z()));
-    chunk.vertex_edges.push_back(name);
-    return vertex;
   }
 
-  // The extra vertex of a cube whose iso-line loop (loop_vertices_) is
-  // fanned around its mean; named after the cube, so it is never welded.
-  int interiorVertex(const BlockKey& key, const Eigen::Vector3i& cube, MeshChunk& chunk) {
+  // The extra vertex (number v) of a cube whose iso-line loop is fanned
+  // around its mean; named after the cube, so it is never welded.
+  void interiorVertex(const BlockKey& key, const VertexPlace& place, Eigen::Vector3f* positions,
+                      Eigen::Vector3f* normals, float* intensities, LatticeEdge* names, std::size_t v) const {
     Eigen::Vector3f position = Eigen::Vector3f::Zero(), normal = Eigen::Vector3f::Zero();
     float intensity = 0.0f;
-    for (int vertex : loop_vertices_) {
-      position += chunk.vertices[vertex];
-      normal += chunk.normals[vertex];
-      if (with_intensity_) intensity += chunk.intensities[vertex];
+    const int* const loop = loop_vertices_.data() + place.loop_begin;
+    for (int i = 0; i < place.loop_size; ++i) {
+      position += positions[loop[i]];
+      normal += normals[loop[i]];
+      if (with_intensity_) intensity += intensities[loop[i]];
     }
-    const float count = float(loop_vertices_.size());
-    chunk.vertices.push_back(position / count);
+    const float count = float(place.loop_size);
+    positions[v] = position / count;
     const float length = normal.norm();
-    chunk.normals.push_back(length > 0.0f ? Eigen::Vector3f(normal / length)
-                                          : chunk.normals[loop_vertices_.front()]);
-    if (with_intensity_) chunk.intensities.push_back(intensity / count);
-    LatticeEdge name;
-    name.block = key;
-    name.index = 3 * edge_ * edge_ * edge_ + cube.x() + edge_ * (cube.y() + edge_ * cube.z());
-    chunk.vertex_edges.push_back(name);
-    return int(chunk.vertices.size()) - 1;
+    normals[v] = length > 0.0f ? Eigen::Vector3f(normal / length) : normals[loop[0]];
+    if (with_intensity_) intensities[v] = intensity / count;
+    const Eigen::Vector3i& cube = place.point;
+    names[v].block = key;
+    names[v].index = 3 * edge_ * edge_ * edge_ + cube.x() + edge_ * (cube.y() + edge_ * cube.z());
   }
 
   // padded_: voxels per padded edge; row_: floats per x run in sdf_ and
@@ -505,7 +543,8 @@ class BlockMesher {
   std::vector<int> vertex_of_edge_;      // local lattice edge -> vertex of the current chunk
   std::array<int, 12> cube_edge_offset_{};  // a cube edge's local lattice edge minus the cube's first
   std::vector<int> vertex_local_edges_;  // what to reset after the chunk
-  std::vector<int> loop_vertices_;
+  std::vector<VertexPlace> vertices_;
+  std::vector<int> loop_vertices_;  // the interior vertices' loops, one after another
 };
 
 // Whether another chunk's cubes may cut the lattice edge a vertex of this
