@@ -935,32 +935,46 @@ struct ReadRegions {
   uint8_t valid = 0;
 };
 
+// Four lanes, word i of a run into lane i % 4: the lanes' multiply chains
+// overlap instead of waiting on one another.
 class Fingerprint {
  public:
   void add(const float* a, const float* b, int count) {
-    for (int i = 0; i < count; ++i) {
-      uint32_t a_bits, b_bits;
-      std::memcpy(&a_bits, a + i, sizeof a_bits);
-      std::memcpy(&b_bits, b + i, sizeof b_bits);
-      mix(uint64_t(b_bits) << 32 | a_bits);
-    }
+    int i = 0;
+    for (; i + 4 <= count; i += 4)
+      for (int lane = 0; lane < 4; ++lane) mix(lane, pair(a, b, i + lane));
+    for (int lane = 0; i < count; ++i, ++lane) mix(lane, pair(a, b, i));
   }
   void add(const float* a, int count) {
-    for (int i = 0; i < count; ++i) {
-      uint32_t bits;
-      std::memcpy(&bits, a + i, sizeof bits);
-      mix(bits);
-    }
+    int i = 0;
+    for (; i + 4 <= count; i += 4)
+      for (int lane = 0; lane < 4; ++lane) mix(lane, bits(a + i + lane));
+    for (int lane = 0; i < count; ++i, ++lane) mix(lane, bits(a + i));
   }
-  uint64_t value() const { return hash_; }
+  uint64_t value() const {
+    uint64_t hash = 0x9E3779B97F4A7C15ull;
+    for (uint64_t lane : lanes_) hash = step(hash, lane);
+    return hash;
+  }
 
  private:
+  static uint64_t bits(const float* value) {
+    uint32_t word;
+    std::memcpy(&word, value, sizeof word);
+    return word;
+  }
+  static uint64_t pair(const float* a, const float* b, int i) { return bits(b + i) << 32 | bits(a + i); }
   // Rotate, mix the word in, multiply by an odd constant: for a given state
   // each step is a bijection of the word, and for a given word one of the
-  // state, so one changed word always changes the final value.
-  void mix(uint64_t word) { hash_ = (((hash_ << 23) | (hash_ >> 41)) ^ word) * 0xff51afd7ed558ccdull; }
+  // state, so one changed word always changes its lane, and a changed lane
+  // the final value.
+  static uint64_t step(uint64_t state, uint64_t word) {
+    return (((state << 23) | (state >> 41)) ^ word) * 0xff51afd7ed558ccdull;
+  }
+  void mix(int lane, uint64_t word) { lanes_[lane] = step(lanes_[lane], word); }
 
-  uint64_t hash_ = 0x9E3779B97F4A7C15ull;
+  std::array<uint64_t, 4> lanes_ = {0x9E3779B97F4A7C15ull, 0xC2B2AE3D27D4EB4Full, 0x165667B19E3779F9ull,
+                                    0x27D4EB2F165667C5ull};
 };
 
 uint64_t readRegionFingerprint(const VoxelBlock& block, int neighbour, int edge, bool with_intensity) {
