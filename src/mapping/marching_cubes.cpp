@@ -1127,25 +1127,31 @@ MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
   result.removed.swap(state.unreported_removals);
   std::sort(result.removed.begin(), result.removed.end(), keyLess);
   result.changed.reserve(rebuilt.size());
-  // The stored chunks trade places with the new ones; freeing the old ones'
-  // arrays (cold memory, five per chunk) is then shared by the threads.
-  for (MeshChunk& chunk : rebuilt) {
-    state.pending.erase(chunk.key);
-    result.changed.push_back(chunk.key);
-    if (chunk.triangles.empty()) {
-      const auto stored = state.chunks.find(chunk.key);
-      if (stored != state.chunks.end()) {
-        std::swap(stored.value(), chunk);
-        state.chunks.erase(stored);
-      }
-    } else {
-      std::swap(state.chunks[chunk.key], chunk);
-    }
-  }
+  // A chunk that replaces a stored one touches only that entry: both
+  // threads find it, trade places and free the old arrays (cold memory,
+  // five per chunk). New and emptied chunks change the map: one thread.
+  std::vector<uint8_t> replaced(rebuilt.size(), 0);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rebuilt.size(), 64),
                     [&](const tbb::blocked_range<std::size_t>& range) {
-                      for (std::size_t i = range.begin(); i != range.end(); ++i) rebuilt[i] = MeshChunk();
+                      for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                        if (rebuilt[i].triangles.empty()) continue;
+                        const auto stored = state.chunks.find(rebuilt[i].key);
+                        if (stored == state.chunks.end()) continue;
+                        const MeshChunk old = std::move(stored.value());
+                        stored.value() = std::move(rebuilt[i]);
+                        replaced[i] = 1;
+                      }
                     });
+  for (std::size_t i = 0; i < rebuilt.size(); ++i) {
+    const BlockKey key = rebuilt[i].key;
+    state.pending.erase(key);
+    result.changed.push_back(key);
+    if (replaced[i]) continue;
+    if (rebuilt[i].triangles.empty())
+      state.chunks.erase(key);
+    else
+      state.chunks.emplace(key, std::move(rebuilt[i]));
+  }
   std::sort(result.changed.begin(), result.changed.end(), keyLess);
   result.pending = state.pending.size();
   meshed_generation_ = generation;
