@@ -7,6 +7,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 #include <tsl/robin_map.h>
 
 #include <Eigen/Geometry>
@@ -30,8 +31,11 @@
 namespace range_image_mapping::mapping {
 namespace {
 
-bool keyLess(const BlockKey& a, const BlockKey& b) {
-  return std::array<int, 3>{a.x(), a.y(), a.z()} < std::array<int, 3>{b.x(), b.y(), b.z()};
+// Lexicographic (x, then y, then z).
+inline bool keyLess(const BlockKey& a, const BlockKey& b) {
+  if (a.x() != b.x()) return a.x() < b.x();
+  if (a.y() != b.y()) return a.y() < b.y();
+  return a.z() < b.z();
 }
 
 std::string keyText(const BlockKey& key) {
@@ -1094,12 +1098,14 @@ MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
   const bool budgeted = !remesh_all && (options_.update_budget_s > 0.0 || options_.max_blocks_per_update > 0);
   // Without a budget by key alone: a block's +1 neighbours then follow it
   // closely, and their voxels are still in cache when they are meshed.
+  // Keys are unique, so either order is total and a parallel sort gives the same queue.
   if (budgeted)
-    std::sort(queue.begin(), queue.end(), [](const auto& a, const auto& b) {
+    tbb::parallel_sort(queue.begin(), queue.end(), [](const auto& a, const auto& b) {
       return a.first != b.first ? a.first < b.first : keyLess(a.second, b.second);
     });
   else
-    std::sort(queue.begin(), queue.end(), [](const auto& a, const auto& b) { return keyLess(a.second, b.second); });
+    tbb::parallel_sort(queue.begin(), queue.end(),
+                       [](const auto& a, const auto& b) { return keyLess(a.second, b.second); });
   std::size_t take = queue.size();
   if (budgeted && options_.max_blocks_per_update > 0) take = std::min(take, options_.max_blocks_per_update);
 
@@ -1152,7 +1158,9 @@ MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
     else
       state.chunks.emplace(key, std::move(rebuilt[i]));
   }
-  std::sort(result.changed.begin(), result.changed.end(), keyLess);
+  // Without a budget the queue was in key order already.
+  if (!std::is_sorted(result.changed.begin(), result.changed.end(), keyLess))
+    std::sort(result.changed.begin(), result.changed.end(), keyLess);
   result.pending = state.pending.size();
   meshed_generation_ = generation;
   result.seconds = secondsSince(start);
