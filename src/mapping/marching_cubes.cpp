@@ -1043,10 +1043,18 @@ MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
   }
   // Blocks whose cubes read a changed block: itself, and those of its 7 lower
   // neighbours that read a changed part of it.
+  // Every block of the map is looked at: both threads test, one collects in order.
+  const std::vector<const VoxelBlock*> blocks = grid.blocks();
+  std::vector<uint8_t> is_changed(blocks.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 1024),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      for (std::size_t i = range.begin(); i != range.end(); ++i)
+                        is_changed[i] = remesh_all || blocks[i]->changed_generation > meshed_generation_ ||
+                                        !state.known_blocks.count(blocks[i]->key);
+                    });
   std::vector<const VoxelBlock*> changed;
-  for (const VoxelBlock* block : grid.blocks())
-    if (remesh_all || block->changed_generation > meshed_generation_ || !state.known_blocks.count(block->key))
-      changed.push_back(block);
+  for (std::size_t i = 0; i < blocks.size(); ++i)
+    if (is_changed[i]) changed.push_back(blocks[i]);
   const int edge = grid.blockEdge();
   const bool with_intensity = grid.options().store_intensity;
   const std::size_t voxels = std::size_t(grid.voxelsPerBlock());
@@ -1062,19 +1070,32 @@ MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
     bool is_new;
     uint64_t fingerprint;
   };
+  // New entries first (one thread: they change the map); then each changed
+  // block's own entry and lookups, on both threads; the looks in order.
+  std::vector<uint8_t> is_new(changed.size()), to_look(changed.size());
+  for (std::size_t i = 0; i < changed.size(); ++i)
+    is_new[i] = state.known_blocks.try_emplace(changed[i]->key).second;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, changed.size(), 64),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                        ReadRegions& regions = state.known_blocks.find(changed[i]->key).value();
+                        if (remesh_all) regions.valid = 0;
+                        uint8_t look = 0;
+                        for (int neighbour = 1; neighbour < 8; ++neighbour) {
+                          const BlockKey lower = lowerNeighbour(changed[i]->key, neighbour);
+                          const uint8_t bit = uint8_t(1u << (neighbour - 1));
+                          if (grid.find(lower) && !state.pending.count(lower))
+                            look |= bit;
+                          else
+                            regions.valid &= uint8_t(~bit);
+                        }
+                        to_look[i] = look;
+                      }
+                    });
   std::vector<Look> looks;
-  for (const VoxelBlock* block : changed) {
-    auto [known, is_new] = state.known_blocks.try_emplace(block->key);
-    ReadRegions& regions = known.value();
-    if (remesh_all) regions.valid = 0;
-    for (int neighbour = 1; neighbour < 8; ++neighbour) {
-      const BlockKey lower = lowerNeighbour(block->key, neighbour);
-      if (grid.find(lower) && !state.pending.count(lower))
-        looks.push_back({block, neighbour, is_new, 0});
-      else
-        regions.valid &= uint8_t(~(1u << (neighbour - 1)));
-    }
-  }
+  for (std::size_t i = 0; i < changed.size(); ++i)
+    for (int neighbour = 1; neighbour < 8; ++neighbour)
+      if (to_look[i] & (1u << (neighbour - 1))) looks.push_back({changed[i], neighbour, is_new[i] != 0, 0});
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, looks.size(), 64),
                     [&](const tbb::blocked_range<std::size_t>& range) {
                       for (std::size_t i = range.begin(); i != range.end(); ++i)
