@@ -28,11 +28,13 @@ started=$SECONDS
 
 cleanup() {
   local status=$?
-  if [ -n "$launch_pid" ] && kill -0 "$launch_pid" 2>/dev/null; then
+  if [ -n "$launch_pid" ] && kill -0 -- "-$launch_pid" 2>/dev/null; then
     {
-      kill -INT "$launch_pid" || true
-      for _ in $(seq 40); do kill -0 "$launch_pid" || break; sleep 0.5; done
-      kill -KILL "$launch_pid" || true
+      # The whole process group: roslaunch, its master and nodes are children
+      # of the job's shell, and would outlive it.
+      kill -INT -- "-$launch_pid" || true
+      for _ in $(seq 40); do kill -0 -- "-$launch_pid" || break; sleep 0.5; done
+      kill -KILL -- "-$launch_pid" || true
       wait "$launch_pid" || true
     } 2>/dev/null
   fi
@@ -96,12 +98,17 @@ bag=$work/sequence/packets.bag
 port=$(python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
 export ROS_MASTER_URI=http://127.0.0.1:$port
 echo "== roslaunch range_image_mapping range_image_mapping.launch rviz:=false (master on port $port)"
+# Job control for this one job: it gets a process group of its own (cleanup
+# stops the group) and, unlike a plain background job, does not ignore SIGINT,
+# which roslaunch needs to shut its nodes and master down.
+set -m
 clean_env ROS_MASTER_URI="$ROS_MASTER_URI" bash -c \
   'set +u; source "$1/setup.bash"; set -u
    exec roslaunch -p "$2" range_image_mapping range_image_mapping.launch bag_file:="$3" rviz:=false \
      config:="$(rospack find range_image_mapping)/config/os0_128_indoor.yaml"' \
   _ "$prefix" "$port" "$bag" >"$work/launch.log" 2>&1 &
 launch_pid=$!
+set +m
 for _ in $(seq 60); do
   kill -0 "$launch_pid" 2>/dev/null || fail "roslaunch ended before its master came up"
   run env ROS_MASTER_URI="$ROS_MASTER_URI" rostopic list >/dev/null 2>&1 && break
