@@ -20,4 +20,12 @@ struct LatticeKeyHash {
   }
 };
 
+// Lexicographic order (x, then y, then z): the one order sorted key lists
+// (meshes, block queues, ties between blocks) are kept in.
+inline bool latticeKeyLess(const LatticeKey& a, const LatticeKey& b) {
+  if (a.x() != b.x()) return a.x() < b.x();
+  if (a.y() != b.y()) return a.y() < b.y();
+  return a.z() < b.z();
+}
+
 }  // namespace range_image_mapping

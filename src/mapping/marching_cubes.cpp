@@ -31,13 +31,6 @@
 namespace range_image_mapping::mapping {
 namespace {
 
-// Lexicographic (x, then y, then z).
-inline bool keyLess(const BlockKey& a, const BlockKey& b) {
-  if (a.x() != b.x()) return a.x() < b.x();
-  if (a.y() != b.y()) return a.y() < b.y();
-  return a.z() < b.z();
-}
-
 std::string keyText(const BlockKey& key) {
   std::ostringstream text;
   text << '(' << key.x() << ", " << key.y() << ", " << key.z() << ')';
@@ -881,7 +874,7 @@ TriangleMesh extractMesh(const VoxelBlockGrid& grid, const MeshOptions& options)
   options.validate();
   std::vector<const VoxelBlock*> blocks = grid.blocks();
   std::sort(blocks.begin(), blocks.end(),
-            [](const VoxelBlock* a, const VoxelBlock* b) { return keyLess(a->key, b->key); });
+            [](const VoxelBlock* a, const VoxelBlock* b) { return latticeKeyLess(a->key, b->key); });
   std::vector<ChunkView> chunks;
   resizeOnHugePages(chunks, blocks.size());
   struct Worker {
@@ -1122,11 +1115,11 @@ MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
   // Keys are unique, so either order is total and a parallel sort gives the same queue.
   if (budgeted)
     tbb::parallel_sort(queue.begin(), queue.end(), [](const auto& a, const auto& b) {
-      return a.first != b.first ? a.first < b.first : keyLess(a.second, b.second);
+      return a.first != b.first ? a.first < b.first : latticeKeyLess(a.second, b.second);
     });
   else
     tbb::parallel_sort(queue.begin(), queue.end(),
-                       [](const auto& a, const auto& b) { return keyLess(a.second, b.second); });
+                       [](const auto& a, const auto& b) { return latticeKeyLess(a.second, b.second); });
   std::size_t take = queue.size();
   if (budgeted && options_.max_blocks_per_update > 0) take = std::min(take, options_.max_blocks_per_update);
 
@@ -1152,7 +1145,7 @@ MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
   }
 
   result.removed.swap(state.unreported_removals);
-  std::sort(result.removed.begin(), result.removed.end(), keyLess);
+  std::sort(result.removed.begin(), result.removed.end(), latticeKeyLess);
   result.changed.reserve(rebuilt.size());
   // A chunk that replaces a stored one touches only that entry: both
   // threads find it, trade places and free the old arrays (cold memory,
@@ -1180,8 +1173,8 @@ MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
       state.chunks.emplace(key, std::move(rebuilt[i]));
   }
   // Without a budget the queue was in key order already.
-  if (!std::is_sorted(result.changed.begin(), result.changed.end(), keyLess))
-    std::sort(result.changed.begin(), result.changed.end(), keyLess);
+  if (!std::is_sorted(result.changed.begin(), result.changed.end(), latticeKeyLess))
+    std::sort(result.changed.begin(), result.changed.end(), latticeKeyLess);
   result.pending = state.pending.size();
   meshed_generation_ = generation;
   result.seconds = secondsSince(start);
@@ -1198,7 +1191,7 @@ std::vector<const MeshChunk*> MeshExtractor::chunks() const {
   sorted.reserve(state_->chunks.size());
   for (const auto& [key, chunk] : state_->chunks) sorted.push_back(&chunk);
   std::sort(sorted.begin(), sorted.end(),
-            [](const MeshChunk* a, const MeshChunk* b) { return keyLess(a->key, b->key); });
+            [](const MeshChunk* a, const MeshChunk* b) { return latticeKeyLess(a->key, b->key); });
   return sorted;
 }
 

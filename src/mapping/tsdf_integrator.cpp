@@ -857,7 +857,7 @@ IntegrationStatistics TsdfIntegrator::update(VoxelBlockGrid& grid, const RangeIm
     activated.push_back({(key.cast<double>() - sensor_in_blocks).squaredNorm(), key, mask, nullptr, 0.0f});
   tbb::parallel_sort(activated.begin(), activated.end(), [](const ActivatedBlock& a, const ActivatedBlock& b) {
     if (a.distance != b.distance) return a.distance < b.distance;
-    return std::lexicographical_compare(a.key.data(), a.key.data() + 3, b.key.data(), b.key.data() + 3);
+    return latticeKeyLess(a.key, b.key);
   });
   // The blocks already in the grid are looked up in parallel (finds only);
   // the new ones are then created in that order, on one thread. Each block's
