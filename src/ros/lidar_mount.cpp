@@ -23,6 +23,7 @@ const Eigen::Isometry3d* LidarMount::baseFromLidar(const std::string& base_frame
     base_frame_ = base_frame;
     lidar_frame_ = lidar_frame;
     base_from_lidar_.reset();
+    fallback_.clear();
     wait_started_ = ros::SteadyTime::now();
     if (lidar_frame.empty() || lidar_frame == base_frame) base_from_lidar_ = Eigen::Isometry3d::Identity();
   }
@@ -35,6 +36,9 @@ const Eigen::Isometry3d* LidarMount::baseFromLidar(const std::string& base_frame
                    lidar_frame.c_str(), t.x(), t.y(), t.z());
   } else if ((ros::SteadyTime::now() - wait_started_).toSec() >= timeout_s_) {
     base_from_lidar_ = Eigen::Isometry3d::Identity();
+    fallback_ = "no transform " + base_frame + " -> " + lidar_frame + " on tf within lidar_transform_timeout: the " +
+                "identity stands in, so the poses are the lidar's; publish the mount (static transform), set " +
+                "base_frame to the lidar frame, or raise lidar_transform_timeout";
     ROS_WARN_NAMED(logger_name_, "no transform %s -> %s after %.1f s (%s): using the identity, so %s is the lidar",
                    base_frame.c_str(), lidar_frame.c_str(), timeout_s_, error.c_str(), base_frame.c_str());
   } else {

@@ -471,6 +471,8 @@ void MapperNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "no range images");
   else if (window.integrated == 0)
     status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "nothing integrated: " + last_warning_);
+  else if (!pose_source_->mountFallback().empty())
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, pose_source_->mountFallback());
   else if (window.refused + window.droppedNoPose() + window.rejected + window.missing_upstream > 0)
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "scans refused, without pose or lost before the mapper");
   else

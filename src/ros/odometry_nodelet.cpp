@@ -47,6 +47,7 @@ namespace {
 
 // Counts since the start; windows (log, diagnostics) are differences of two snapshots.
 struct OdometryStatistics {
+  std::size_t received = 0;        // range images that arrived
   std::size_t frames = 0;          // scans given to the odometry
   std::size_t registered = 0;      // scans registered (not skipped, not a reset)
   std::size_t iterations = 0;      // over registered scans
@@ -62,10 +63,14 @@ struct OdometryStatistics {
   std::size_t dropped_frames = 0;  // gaps in the sensor's frame counter
   std::size_t out_of_order = 0;    // frames older than the last published one
   std::size_t rejected = 0;        // messages that could not be converted
+  std::size_t published = 0;       // odometry messages published
+  std::size_t held_for_mount = 0;  // scans that waited for tf base_frame -> lidar before their step
+  std::size_t dropped_for_mount = 0;  // of those, dropped: too many waiting
   double seconds = 0.0;            // wall time in the odometry step
 
   OdometryStatistics operator-(const OdometryStatistics& earlier) const {
     OdometryStatistics d;
+    d.received = received - earlier.received;
     d.frames = frames - earlier.frames;
     d.registered = registered - earlier.registered;
     d.iterations = iterations - earlier.iterations;
@@ -81,6 +86,9 @@ struct OdometryStatistics {
     d.dropped_frames = dropped_frames - earlier.dropped_frames;
     d.out_of_order = out_of_order - earlier.out_of_order;
     d.rejected = rejected - earlier.rejected;
+    d.published = published - earlier.published;
+    d.held_for_mount = held_for_mount - earlier.held_for_mount;
+    d.dropped_for_mount = dropped_for_mount - earlier.dropped_for_mount;
     d.seconds = seconds - earlier.seconds;
     return d;
   }
@@ -94,6 +102,9 @@ class OdometryNodelet : public nodelet::Nodelet {
 
  private:
   void onRangeImage(const LidarRangeImage::ConstPtr& message);
+  // Steps the scans held for the mount, in arrival order, as far as tf has it.
+  void stepWaitingScans();
+  void step(const LidarRangeImage::ConstPtr& message, const Eigen::Isometry3d& base_from_lidar);
   bool onReset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
   void noteFrameCounter(const LidarRangeImage& message);
   // step_s: time since the previous registered scan, 0 after a reset.
@@ -121,6 +132,13 @@ class OdometryNodelet : public nodelet::Nodelet {
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
   std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;
   std::unique_ptr<LidarMount> mount_;  // base_frame -> lidar frame
+  // Scans that arrived before the mount was known (tf base_frame -> lidar,
+  // at most lidar_transform_timeout): held, not stepped, so the pipeline
+  // poses the base from the first scan on and none goes unpublished. The
+  // timer retries when no scan follows.
+  std::deque<LidarRangeImage::ConstPtr> waiting_for_mount_;
+  static constexpr std::size_t kMaxScansWaitingForMount = 200;
+  ros::SteadyTimer mount_timer_;
   std::unique_ptr<WallClockDiagnostics> diagnostics_;
 
   // ROS time at the previous scan, and whether it has gone back since the
@@ -166,6 +184,14 @@ void OdometryNodelet::onInit() {
 
   range_image_subscriber_ = node.subscribe("range_image", parameters_.queue_size,
                                            &OdometryNodelet::onRangeImage, this);
+  mount_timer_ = node.createSteadyTimer(ros::WallDuration(0.05), [this](const ros::SteadyTimerEvent&) {
+    if (waiting_for_mount_.empty()) return;
+    try {
+      stepWaitingScans();
+    } catch (const std::exception& error) {
+      NODELET_ERROR("scans waiting for tf %s -> lidar: %s", parameters_.base_frame.c_str(), error.what());
+    }
+  });
   NODELET_INFO("Odometry: range images from %s, odometry on %s, %s %s -> %s%s",
                range_image_subscriber_.getTopic().c_str(), odometry_publisher_.getTopic().c_str(),
                parameters_.publish_tf ? "tf" : "no tf",
@@ -176,7 +202,47 @@ void OdometryNodelet::onInit() {
 
 void OdometryNodelet::onRangeImage(const LidarRangeImage::ConstPtr& message) {
   try {
+    ++statistics_.received;
     noteFrameCounter(*message);
+    waiting_for_mount_.push_back(message);
+    if (waiting_for_mount_.size() > kMaxScansWaitingForMount) {
+      const LidarRangeImage::ConstPtr oldest = waiting_for_mount_.front();
+      waiting_for_mount_.pop_front();
+      ++statistics_.dropped_for_mount;
+      last_warning_ = "scans dropped waiting for tf " + parameters_.base_frame + " -> " + oldest->header.frame_id +
+                      ": publish the lidar's mount (static transform), or set base_frame to the lidar frame";
+      if (frame_log_.allow(1.0))
+        NODELET_WARN("frame %u dropped: %zu scans wait for tf %s -> %s (%zu dropped so far); publish the lidar's "
+                     "mount, or set base_frame to the lidar frame",
+                     oldest->frame_id, kMaxScansWaitingForMount, parameters_.base_frame.c_str(),
+                     oldest->header.frame_id.c_str(), statistics_.dropped_for_mount);
+    }
+    stepWaitingScans();
+    if (!waiting_for_mount_.empty()) ++statistics_.held_for_mount;
+  } catch (const std::exception& error) {
+    ++statistics_.rejected;
+    if (error_log_.allow(parameters_.statistics_period_s))
+      NODELET_ERROR("range image on %s failed: %s", range_image_subscriber_.getTopic().c_str(), error.what());
+  }
+}
+
+void OdometryNodelet::stepWaitingScans() {
+  const std::size_t waited = waiting_for_mount_.size();
+  while (!waiting_for_mount_.empty()) {
+    const LidarRangeImage::ConstPtr message = waiting_for_mount_.front();
+    const Eigen::Isometry3d* mount = mount_->baseFromLidar(parameters_.base_frame, message->header.frame_id);
+    if (!mount) return;  // tf has not got it yet; the next scan or the timer asks again
+    const Eigen::Isometry3d base_from_lidar = *mount;
+    if (waited > 1 && waiting_for_mount_.size() == waited)
+      NODELET_INFO("%zu scans waited for tf %s -> %s: stepped now", waited, parameters_.base_frame.c_str(),
+                   message->header.frame_id.c_str());
+    waiting_for_mount_.pop_front();
+    step(message, base_from_lidar);
+  }
+}
+
+void OdometryNodelet::step(const LidarRangeImage::ConstPtr& message, const Eigen::Isometry3d& base_from_lidar) {
+  try {
     RangeImage image;
     try {
       image = fromMessage(*message, models_);
@@ -186,10 +252,8 @@ void OdometryNodelet::onRangeImage(const LidarRangeImage::ConstPtr& message) {
         NODELET_ERROR("range image on %s dropped: %s", range_image_subscriber_.getTopic().c_str(), error.what());
       return;
     }
-    // The mount first: the pipeline poses the base, odom being the base at
-    // the first scan. Until tf has it, scans still go through the odometry.
-    const Eigen::Isometry3d* base_from_lidar = mount_->baseFromLidar(parameters_.base_frame, message->header.frame_id);
-    if (base_from_lidar) pipeline_->setBaseFromLidar(*base_from_lidar);
+    // The mount first: the pipeline poses the base, odom being the base at the first scan.
+    pipeline_->setBaseFromLidar(base_from_lidar);
 
     // ROS time going back (a bag loop, a restarted replay): the source
     // started over, and the pipeline restarts the odometry at the identity if
@@ -242,8 +306,7 @@ void OdometryNodelet::onRangeImage(const LidarRangeImage::ConstPtr& message) {
                      message->frame_id, message->header.stamp.toSec(), last_published_stamp_.toSec());
       return;
     }
-    if (!base_from_lidar) return;  // still waiting for tf
-    publish(result, message->header, *base_from_lidar, step_s);
+    publish(result, message->header, base_from_lidar, step_s);
     if (static_image_publisher_.getNumSubscribers() > 0) publishStaticImage(message, image, update);
     if (deskewed_cloud_publisher_ && deskewed_cloud_publisher_.getNumSubscribers() > 0)
       publishDeskewedCloud(message->header);
@@ -283,6 +346,7 @@ void OdometryNodelet::publish(const pipeline::ScanResult& result, const std_msgs
     return;
   }
   last_published_stamp_ = header.stamp;
+  ++statistics_.published;
 
   const auto odometry = boost::make_shared<nav_msgs::Odometry>();
   odometry->header.stamp = header.stamp;
@@ -389,10 +453,25 @@ void OdometryNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
   status.add("dropped frames", window.dropped_frames);
   status.add("out of order", window.out_of_order);
   status.add("rejected messages", window.rejected);
+  status.add("scans waiting for tf (base_frame -> lidar)", waiting_for_mount_.size());
+  status.add("dropped waiting for tf", window.dropped_for_mount);
+  status.add("total scans received", statistics_.received);
+  status.add("total scans stepped", statistics_.frames);
+  status.add("total scans published", statistics_.published);
+  status.add("total scans held for tf (base_frame -> lidar)", statistics_.held_for_mount);
+  status.add("total dropped frames", statistics_.dropped_frames);
+  status.add("total out of order", statistics_.out_of_order);
   status.add("condition number", last_update_.condition_number);
   status.add("keyframe distance in use (m)", last_update_.keyframe_distance_m);
   status.add("last warning", last_warning_);
-  if (window.frames == 0)
+  if (!mount_->fallback().empty())
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, mount_->fallback());
+  else if (window.dropped_for_mount > 0 || !waiting_for_mount_.empty())
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN,
+                   "scans wait for tf " + parameters_.base_frame + " -> lidar (the mount; up to " +
+                       std::to_string(parameters_.lidar_transform_timeout_s) +
+                       " s, lidar_transform_timeout): publish it, or set base_frame to the lidar frame");
+  else if (window.frames == 0)
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "no range images");
   else if (window.degenerate + window.suspect + window.dropped_frames + window.out_of_order + window.rejected +
                window.skipped >

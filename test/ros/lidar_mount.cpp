@@ -41,11 +41,18 @@ TEST(LidarMount, IdentityForTheSameFrameOrAfterTheTimeout) {
   const Eigen::Isometry3d* same = mount.baseFromLidar("os_lidar", "os_lidar");
   ASSERT_NE(same, nullptr);
   EXPECT_TRUE(same->isApprox(Eigen::Isometry3d::Identity()));
+  EXPECT_EQ(mount.fallback(), "");  // the lidar is the base: nothing to warn about
   EXPECT_EQ(mount.baseFromLidar("base_link", "os_lidar"), nullptr);  // a new pair waits again
+  EXPECT_EQ(mount.fallback(), "");
   ros::WallDuration(0.1).sleep();
   const Eigen::Isometry3d* fallback = mount.baseFromLidar("base_link", "os_lidar");
   ASSERT_NE(fallback, nullptr);
   EXPECT_TRUE(fallback->isApprox(Eigen::Isometry3d::Identity()));
+  // Said, naming the transform and the fixes, until the frames change.
+  EXPECT_NE(mount.fallback().find("base_link -> os_lidar"), std::string::npos) << mount.fallback();
+  EXPECT_NE(mount.fallback().find("lidar_transform_timeout"), std::string::npos) << mount.fallback();
+  ASSERT_NE(mount.baseFromLidar("os_lidar", "os_lidar"), nullptr);
+  EXPECT_EQ(mount.fallback(), "");
 }
 
 // A twist drawn from covariance C in one frame is, in the other, the same

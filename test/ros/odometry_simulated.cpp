@@ -5,6 +5,7 @@
 // in child_frame_id), the tf chain odom -> base_link -> lidar must exist and
 // agree with the odometry messages, and the covariances must be finite.
 // write_odometry_bag.sh writes the sequence while roslaunch loads the test.
+#include "range_image_mapping/LidarRangeImage.h"
 #include "range_image_mapping/evaluation/trajectory_metrics.h"
 #include "range_image_mapping/ros/range_image_conversions.h"
 #include "range_image_mapping/scan_motion.h"
@@ -50,6 +51,9 @@ struct Settings {
   double max_linear_velocity_error_mps = 0.1;    // rms over the scans
   double max_angular_velocity_error_radps = 0.05;
   int min_frames = 25;
+  // > 0: the mount base_link -> sensor goes on tf only once this many range
+  // images were seen, so the Odometry must hold the scans until it comes.
+  int mount_after_scans = 0;
 };
 
 Settings readSettings() {
@@ -70,6 +74,7 @@ Settings readSettings() {
   settings.max_angular_velocity_error_radps =
       private_node.param("max_angular_velocity_error", settings.max_angular_velocity_error_radps);
   settings.min_frames = private_node.param("min_frames", settings.min_frames);
+  settings.mount_after_scans = private_node.param("mount_after_scans", settings.mount_after_scans);
   return settings;
 }
 
@@ -104,7 +109,21 @@ TEST(OdometrySimulated, FollowsTheGroundTruthOnTfAndOdometry) {
   geometry_msgs::TransformStamped mount = tf2::eigenToTransform(baseFromSensor());
   mount.header.frame_id = settings.base_frame;
   mount.child_frame_id = settings.sensor_frame;
-  static_broadcaster.sendTransform(mount);
+  std::size_t range_images = 0;
+  ros::Time first_range_image_stamp;
+  ros::Subscriber range_image_subscriber;
+  if (settings.mount_after_scans > 0) {
+    range_image_subscriber = node.subscribe<LidarRangeImage>(
+        "/range_image", 100, [&](const LidarRangeImage::ConstPtr& image) {
+          if (range_images == 0) first_range_image_stamp = image->header.stamp;
+          if (++range_images == std::size_t(settings.mount_after_scans)) {
+            static_broadcaster.sendTransform(mount);
+            std::cout << "mount on tf after " << range_images << " range images\n";
+          }
+        });
+  } else {
+    static_broadcaster.sendTransform(mount);
+  }
 
   std::vector<nav_msgs::Odometry::ConstPtr> odometry;
   nav_msgs::Path::ConstPtr path;
@@ -133,6 +152,12 @@ TEST(OdometrySimulated, FollowsTheGroundTruthOnTfAndOdometry) {
       },
       settings.timeout_s);
   ASSERT_GE(int(odometry.size()), settings.min_frames) << "odometry messages within " << settings.timeout_s << " s";
+  if (settings.mount_after_scans > 0) {
+    EXPECT_GE(range_images, std::size_t(settings.mount_after_scans)) << "the mount was never sent";
+    // The scans that waited for the mount are posed too: the first message is
+    // the first scan's, not the first after the mount.
+    EXPECT_EQ(odometry.front()->header.stamp, first_range_image_stamp);
+  }
 
   // Every message: frames, finite pose, finite symmetric covariance.
   for (const auto& message : odometry) {

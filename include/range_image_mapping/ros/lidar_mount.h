@@ -33,6 +33,10 @@ class LidarMount {
   // nullptr while waiting for tf. Frames equal (or an empty lidar frame):
   // the identity at once.
   const Eigen::Isometry3d* baseFromLidar(const std::string& base_frame, const std::string& lidar_frame);
+  // What to tell the user when the identity stands in because tf had no
+  // mount within the timeout (the poses are then the lidar's, labelled as
+  // the base's); empty otherwise.
+  const std::string& fallback() const { return fallback_; }
 
  private:
   const tf2_ros::Buffer& tf_;
@@ -41,6 +45,7 @@ class LidarMount {
   std::string base_frame_, lidar_frame_;
   std::optional<Eigen::Isometry3d> base_from_lidar_;
   ros::SteadyTime wait_started_;
+  std::string fallback_;
 };
 
 }  // namespace range_image_mapping

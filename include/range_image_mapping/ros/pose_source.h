@@ -83,6 +83,8 @@ class PoseSource {
   // Forgets the waiting scans, unanswered, and the odometry (a map reset).
   void clear();
   std::size_t waitingCount() const { return waiting_.size(); }
+  // Non-empty when the identity stands in for a mount tf never had (LidarMount::fallback).
+  const std::string& mountFallback() const { return mount_.fallback(); }
 
   // Where the poses come from, for the start-up log.
   std::string description() const;
