@@ -136,7 +136,7 @@ class AdapterNodelet : public nodelet::Nodelet {
  private:
   // Ouster packets.
   void startOusterInput();
-  void onPacketMessage(const topic_tools::ShapeShifter::ConstPtr& message);
+  void onPacketMessage(const ros::MessageEvent<topic_tools::ShapeShifter const>& event);
   void onMetadataMessage(const std_msgs::String::ConstPtr& message);
   void useMetadata(const OusterMetadata& metadata, const std::string& origin);
   void feedPacket(const uint8_t* data, std::size_t size, const ros::Time& receipt);
@@ -367,9 +367,14 @@ void AdapterNodelet::replaceBatcher(std::unique_ptr<ScanBatcher> fresh) {
   current_frame_receipt_ = previous_frame_receipt_ = ros::Time();
 }
 
-void AdapterNodelet::onPacketMessage(const topic_tools::ShapeShifter::ConstPtr& message) {
+void AdapterNodelet::onPacketMessage(const ros::MessageEvent<topic_tools::ShapeShifter const>& event) {
   try {
-    const ros::Time receipt = ros::Time::now();
+    // When roscpp received the packet, not when this callback runs: on a
+    // loaded machine the nodelet's queue runs seconds behind, and a replay's
+    // clock may have stopped by then (the bag ended), which would stamp the
+    // last revolutions alike.
+    const ros::Time receipt = event.getReceiptTime();
+    const topic_tools::ShapeShifter::ConstPtr message = event.getConstMessage();
     last_packet_time_ = ros::SteadyTime::now();
     if (batcher_ && !last_receipt_.isZero() && receipt < last_receipt_) {
       NODELET_WARN("ROS time jumped back by %.3f s (bag loop or restart)", (last_receipt_ - receipt).toSec());

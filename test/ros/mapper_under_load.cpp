@@ -53,8 +53,8 @@ class BusyCore {
   pid_t pid_ = -1;
 };
 
-// The Mapper's status values, the last message's and the largest seen.
-struct MapperStatus {
+// A nodelet's status values, the last message's and the largest seen.
+struct NodeletStatus {
   std::map<std::string, std::string> last;
   std::map<std::string, double> largest;
   std::size_t messages = 0;
@@ -78,25 +78,30 @@ TEST(MapperUnderLoad, EveryScanReachesTheOdometryAndTheMap) {
   ros::Subscriber odometry_subscriber = node.subscribe<nav_msgs::Odometry>(
       "/odometry", 1000,
       [&](const nav_msgs::Odometry::ConstPtr& message) { odometry_stamps.insert(message->header.stamp.toSec()); });
-  MapperStatus mapper;
+  std::map<std::string, NodeletStatus> statuses;  // by hardware id on /diagnostics
+  NodeletStatus& adapter = statuses["lidar_adapter"];
+  NodeletStatus& odometry = statuses["lidar_odometry"];
+  NodeletStatus& mapper = statuses["tsdf_mapper"];
   std::set<std::string> reporting;  // hardware ids on /diagnostics
   double deferred = 0.0;
   ros::Subscriber diagnostics_subscriber = node.subscribe<diagnostic_msgs::DiagnosticArray>(
       "/diagnostics", 100, [&](const diagnostic_msgs::DiagnosticArray::ConstPtr& message) {
         for (const diagnostic_msgs::DiagnosticStatus& status : message->status) {
           reporting.insert(status.hardware_id);
-          if (status.hardware_id != "tsdf_mapper") continue;
-          ++mapper.messages;
+          const auto found = statuses.find(status.hardware_id);
+          if (found == statuses.end()) continue;
+          NodeletStatus& nodelet = found->second;
+          ++nodelet.messages;
           for (const diagnostic_msgs::KeyValue& entry : status.values) {
-            mapper.last[entry.key] = entry.value;
+            nodelet.last[entry.key] = entry.value;
             try {
-              double& largest = mapper.largest.try_emplace(entry.key, -1e300).first->second;
+              double& largest = nodelet.largest.try_emplace(entry.key, -1e300).first->second;
               largest = std::max(largest, std::stod(entry.value));
             } catch (const std::exception&) {
               // a text value (last warning)
             }
           }
-          deferred += mapper.value("mesh updates deferred (behind)");
+          if (&nodelet == &mapper) deferred += mapper.value("mesh updates deferred (behind)");
         }
       });
 
@@ -129,12 +134,24 @@ TEST(MapperUnderLoad, EveryScanReachesTheOdometryAndTheMap) {
   // The last diagnostics after the replay: nothing more comes in.
   spinUntil([] { return false; }, 3.0);
 
-  char summary[1024];
+  // Where each scan went, stage by stage, so that a loss names its stage.
+  const int packets_per_scan = 1024 / 16;  // outdoor_car's OS1-128: 1024 columns, 16 per packet
+  char summary[2048];
   std::snprintf(summary, sizeof(summary),
-                "under load: %zu odometry messages; mapper: %s scans received, %s integrated, %s without pose, %s "
-                "lost before; max scan-to-map latency %.0f ms, max scans waiting for a pose %.0f, mean pose wait up "
-                "to %.1f ms, %.0f mesh updates deferred, mean integration up to %.1f ms, triangles %s (%s shown)",
-                odometry_stamps.size(), mapper.last["total scans received"].c_str(),
+                "under load: adapter: %s of %d packets, %s scans (%s incomplete, %s restamped); odometry: %s "
+                "scans received, %s stepped, %s published, %s out of order, %s held for tf base -> lidar, %s "
+                "dropped frames; %zu odometry messages here; mapper: %s scans received, %s integrated, %s without "
+                "pose, %s lost before; max scan-to-map latency %.0f ms, max scans waiting for a pose %.0f, mean pose "
+                "wait up to %.1f ms, %.0f mesh updates deferred, mean integration up to %.1f ms, triangles %s (%s "
+                "shown)",
+                adapter.last["packets"].c_str(), frames * packets_per_scan, adapter.last["scans"].c_str(),
+                adapter.last["incomplete scans"].c_str(),
+                adapter.last["scans restamped (ROS time stood still)"].c_str(),
+                odometry.last["total scans received"].c_str(), odometry.last["total scans stepped"].c_str(),
+                odometry.last["total scans published"].c_str(), odometry.last["total out of order"].c_str(),
+                odometry.last["total scans held for tf (base_frame -> lidar)"].c_str(),
+                odometry.last["total dropped frames"].c_str(), odometry_stamps.size(),
+                mapper.last["total scans received"].c_str(),
                 mapper.last["total scans integrated"].c_str(), mapper.last["total scans without pose"].c_str(),
                 mapper.last["total scans lost before the mapper"].c_str(),
                 mapper.peak("max scan-to-map latency (ms)"), mapper.peak("max scans waiting for a pose"),
@@ -144,7 +161,9 @@ TEST(MapperUnderLoad, EveryScanReachesTheOdometryAndTheMap) {
   SCOPED_TRACE(summary);  // in every failure message below, so a CI log's summary has the figures
   EXPECT_TRUE(done) << "not every scan arrived within " << timeout_s << " s; last warning: "
                     << mapper.last["last warning"];
-  EXPECT_EQ(int(odometry_stamps.size()), frames) << "scans posed by the odometry";
+  EXPECT_EQ(adapter.value("scans"), frames) << "scans the Adapter assembled from the packets";
+  EXPECT_EQ(odometry.value("total scans published"), frames) << "last warning: " << odometry.last["last warning"];
+  EXPECT_EQ(int(odometry_stamps.size()), frames) << "scans posed by the odometry, as this node received them";
   EXPECT_EQ(mapper.value("total scans received"), frames);
   EXPECT_EQ(mapper.value("total scans integrated"), frames) << "last warning: " << mapper.last["last warning"];
   EXPECT_EQ(mapper.value("total scans without pose"), 0.0) << "last warning: " << mapper.last["last warning"];
