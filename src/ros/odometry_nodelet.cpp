@@ -467,10 +467,10 @@ void OdometryNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
   if (!mount_->fallback().empty())
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, mount_->fallback());
   else if (window.dropped_for_mount > 0 || !waiting_for_mount_.empty())
-    status.summary(diagnostic_msgs::DiagnosticStatus::WARN,
-                   "scans wait for tf " + parameters_.base_frame + " -> lidar (the mount; up to " +
-                       std::to_string(parameters_.lidar_transform_timeout_s) +
-                       " s, lidar_transform_timeout): publish it, or set base_frame to the lidar frame");
+    status.summaryf(diagnostic_msgs::DiagnosticStatus::WARN,
+                    "scans wait for tf %s -> lidar (the mount; up to %g s, lidar_transform_timeout): publish it, or "
+                    "set base_frame to the lidar frame",
+                    parameters_.base_frame.c_str(), parameters_.lidar_transform_timeout_s);
   else if (window.frames == 0)
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "no range images");
   else if (window.degenerate + window.suspect + window.dropped_frames + window.out_of_order + window.rejected +
