@@ -489,16 +489,19 @@ void OdometryNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
 
 void OdometryNodelet::onStatisticsTimer(const ros::SteadyTimerEvent&) {
   const auto [window, period] = log_window_.advance(statistics_);
-  if (window.frames == 0 || period <= 0.0) return;
+  if (window.received == 0 || period <= 0.0) return;
+  // Scans received but none stepped: they wait for the mount (stepWaitingScans).
+  const double stepped = std::max<double>(1.0, double(window.frames));
   const double registered = std::max<double>(1.0, double(window.registered));
   NODELET_INFO("odometry: %.1f Hz, %.1f ms per step, %.1f iterations, %.0f inliers (%.0f %% of pixels), %.1f %% "
                "moving; degenerate %zu (untrusted %zu), suspect %zu, skipped %zu, resets %zu, dropped %zu, out of "
-               "order %zu, rejected %zu",
-               double(window.frames) / period, 1e3 * window.seconds / double(window.frames),
+               "order %zu, rejected %zu; %zu received, %zu held and %zu dropped waiting for tf %s -> lidar",
+               double(window.frames) / period, 1e3 * window.seconds / stepped,
                double(window.iterations) / registered, double(window.inliers) / registered,
                100.0 * window.inlier_share / registered, 100.0 * window.moving_share / registered, window.degenerate,
                window.untrusted, window.suspect, window.skipped, window.resets, window.dropped_frames, window.out_of_order,
-               window.rejected);
+               window.rejected, window.received, window.held_for_mount, window.dropped_for_mount,
+               parameters_.base_frame.c_str());
 }
 
 }  // namespace range_image_mapping

@@ -3,7 +3,9 @@
 // reach the odometry and every scan the map. The Mapper's diagnostics
 // (tsdf_mapper) give its totals and, when a scan is lost, the reason; the
 // figures under load (scan-to-map latency, scans waiting for a pose, mesh
-// updates deferred) are printed for the record.
+// updates deferred) are printed for the record. The test listens to the mesh
+// as rviz would, so the Mapper meshes while it integrates (nobody listening,
+// it would not mesh at all).
 #include "rostest_main.h"
 #include "spin_until.h"
 
@@ -12,6 +14,7 @@
 #include <nav_msgs/Odometry.h>
 #include <ros/ros.h>
 #include <std_srvs/SetBool.h>
+#include <visualization_msgs/MarkerArray.h>
 
 #include <signal.h>
 #include <sys/prctl.h>
@@ -78,6 +81,12 @@ TEST(MapperUnderLoad, EveryScanReachesTheOdometryAndTheMap) {
   ros::Subscriber odometry_subscriber = node.subscribe<nav_msgs::Odometry>(
       "/odometry", 1000,
       [&](const nav_msgs::Odometry::ConstPtr& message) { odometry_stamps.insert(message->header.stamp.toSec()); });
+  std::size_t mesh_messages = 0, mesh_markers = 0;
+  ros::Subscriber mesh_subscriber = node.subscribe<visualization_msgs::MarkerArray>(
+      "/mesh", 100, [&](const visualization_msgs::MarkerArray::ConstPtr& message) {
+        ++mesh_messages;
+        mesh_markers += message->markers.size();
+      });
   std::map<std::string, NodeletStatus> statuses;  // by hardware id on /diagnostics
   NodeletStatus& adapter = statuses["lidar_adapter"];
   NodeletStatus& odometry = statuses["lidar_odometry"];
@@ -111,12 +120,13 @@ TEST(MapperUnderLoad, EveryScanReachesTheOdometryAndTheMap) {
   ASSERT_TRUE(spinUntil(
       [&] {
         return reporting.count("lidar_adapter") && reporting.count("lidar_odometry") &&
-               reporting.count("tsdf_mapper") && odometry_subscriber.getNumPublishers() > 0;
+               reporting.count("tsdf_mapper") && odometry_subscriber.getNumPublishers() > 0 &&
+               mesh_subscriber.getNumPublishers() > 0;
       },
       120.0))
       << "the nodelets did not all report within 120 s (adapter " << reporting.count("lidar_adapter")
       << ", odometry " << reporting.count("lidar_odometry") << ", mapper " << reporting.count("tsdf_mapper")
-      << "), or /odometry has no publisher";
+      << "), or /odometry or /mesh has no publisher";
   const std::string resume_service = "/rosbag_play/pause_playback";
   ASSERT_TRUE(ros::service::waitForService(resume_service, 120 * 1000)) << resume_service << " never came";
 
@@ -142,8 +152,8 @@ TEST(MapperUnderLoad, EveryScanReachesTheOdometryAndTheMap) {
                 "scans received, %s stepped, %s published, %s out of order, %s held for tf base -> lidar, %s "
                 "dropped frames; %zu odometry messages here; mapper: %s scans received, %s integrated, %s without "
                 "pose, %s lost before; max scan-to-map latency %.0f ms, max scans waiting for a pose %.0f, mean pose "
-                "wait up to %.1f ms, %.0f mesh updates deferred, mean integration up to %.1f ms, triangles %s (%s "
-                "shown)",
+                "wait up to %.1f ms, %.0f mesh updates deferred, mean integration up to %.1f ms, mean mesh update up to "
+                "%.1f ms, triangles %s (%s shown); %zu mesh messages (%zu markers) here",
                 adapter.last["packets"].c_str(), frames * packets_per_scan, adapter.last["scans"].c_str(),
                 adapter.last["incomplete scans"].c_str(),
                 adapter.last["scans restamped (ROS time stood still)"].c_str(),
@@ -156,7 +166,8 @@ TEST(MapperUnderLoad, EveryScanReachesTheOdometryAndTheMap) {
                 mapper.last["total scans lost before the mapper"].c_str(),
                 mapper.peak("max scan-to-map latency (ms)"), mapper.peak("max scans waiting for a pose"),
                 mapper.peak("mean pose wait (ms)"), deferred, mapper.peak("mean integration (ms)"),
-                mapper.last["triangles"].c_str(), mapper.last["triangles shown"].c_str());
+                mapper.peak("mean mesh update (ms)"), mapper.last["triangles"].c_str(),
+                mapper.last["triangles shown"].c_str(), mesh_messages, mesh_markers);
   std::printf("%s\n", summary);
   SCOPED_TRACE(summary);  // in every failure message below, so a CI log's summary has the figures
   EXPECT_TRUE(done) << "not every scan arrived within " << timeout_s << " s; last warning: "
@@ -168,6 +179,8 @@ TEST(MapperUnderLoad, EveryScanReachesTheOdometryAndTheMap) {
   EXPECT_EQ(mapper.value("total scans integrated"), frames) << "last warning: " << mapper.last["last warning"];
   EXPECT_EQ(mapper.value("total scans without pose"), 0.0) << "last warning: " << mapper.last["last warning"];
   EXPECT_EQ(mapper.value("total scans lost before the mapper"), 0.0);
+  EXPECT_GT(mapper.value("triangles"), 0.0) << "the Mapper never meshed, though /mesh has a subscriber";
+  EXPECT_GT(mesh_markers, 0u) << "no mesh reached the subscriber";
   EXPECT_TRUE(busy.running()) << "the busy process ended early: the load was not there all along";
 }
 
