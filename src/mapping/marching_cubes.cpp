@@ -850,6 +850,32 @@ TriangleMesh weldChunks(const std::vector<const MeshChunk*>& chunks) {
   return weldViews(views, edge);
 }
 
+// `from` into `to`'s own arrays, which keep their capacity unless that is
+// over twice what `from` needs (a chunk does not hold on to the memory of
+// its largest version). The arrays are first made large enough, so a failed
+// allocation leaves `to` as it was.
+void copyChunk(const MeshChunk& from, MeshChunk& to) {
+  if (to.vertices.capacity() > 2 * from.vertices.size() + 16 ||
+      to.triangles.capacity() > 2 * from.triangles.size() + 16) {
+    MeshChunk smaller;
+    copyChunk(from, smaller);
+    to = std::move(smaller);
+    return;
+  }
+  to.vertices.reserve(from.vertices.size());
+  to.normals.reserve(from.normals.size());
+  to.intensities.reserve(from.intensities.size());
+  to.triangles.reserve(from.triangles.size());
+  to.vertex_edges.reserve(from.vertex_edges.size());
+  to.key = from.key;
+  to.block_edge = from.block_edge;
+  to.vertices.assign(from.vertices.begin(), from.vertices.end());
+  to.normals.assign(from.normals.begin(), from.normals.end());
+  to.intensities.assign(from.intensities.begin(), from.intensities.end());
+  to.triangles.assign(from.triangles.begin(), from.triangles.end());
+  to.vertex_edges.assign(from.vertex_edges.begin(), from.vertex_edges.end());
+}
+
 double secondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
@@ -1141,9 +1167,10 @@ MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
   std::size_t take = queue.size();
   if (budgeted && options_.max_blocks_per_update > 0) take = std::min(take, options_.max_blocks_per_update);
 
-  // Meshing may throw (a malformed block): no chunk is replaced before it is
-  // done, and what waited still waits.
+  // Meshing may throw (a malformed block): what waited still waits (chunks
+  // re-meshed before that hold their new triangles).
   std::vector<MeshChunk> rebuilt;
+  std::vector<uint8_t> replaced;
   rebuilt.reserve(take);
   std::size_t done = 0;
   while (done < take) {
@@ -1153,11 +1180,27 @@ MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
       batch = std::min(batch, kBlocksPerBudgetBatch);
     }
     rebuilt.resize(done + batch);
+    replaced.resize(done + batch, 0);
+    // A chunk that replaces a stored one is copied into that one's arrays
+    // (finds only: both threads): a block's new chunk is about as large as
+    // its last, so it costs no allocation, no fresh memory to fault in and
+    // no freeing of the old arrays. New and emptied chunks change the map:
+    // one thread, below.
     tbb::parallel_for(tbb::blocked_range<std::size_t>(done, done + batch, 4),
                       [&](const tbb::blocked_range<std::size_t>& range) {
                         BlockMesher& mesher = state.meshers.local();
-                        for (std::size_t i = range.begin(); i != range.end(); ++i)
-                          rebuilt[i] = mesher.mesh(grid, *grid.find(queue[i].second), options_);
+                        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                          const MeshChunk& built = mesher.build(grid, *grid.find(queue[i].second), options_);
+                          if (!built.triangles.empty()) {
+                            const auto stored = state.chunks.find(built.key);
+                            if (stored != state.chunks.end()) {
+                              copyChunk(built, stored.value());
+                              replaced[i] = 1;
+                              continue;
+                            }
+                          }
+                          copyChunk(built, rebuilt[i]);
+                        }
                       });
     done += batch;
   }
@@ -1165,26 +1208,11 @@ MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
   result.removed.swap(state.unreported_removals);
   std::sort(result.removed.begin(), result.removed.end(), latticeKeyLess);
   result.changed.reserve(rebuilt.size());
-  // A chunk that replaces a stored one touches only that entry: both
-  // threads find it, trade places and free the old arrays (cold memory,
-  // five per chunk). New and emptied chunks change the map: one thread.
-  std::vector<uint8_t> replaced(rebuilt.size(), 0);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rebuilt.size(), 64),
-                    [&](const tbb::blocked_range<std::size_t>& range) {
-                      for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                        if (rebuilt[i].triangles.empty()) continue;
-                        const auto stored = state.chunks.find(rebuilt[i].key);
-                        if (stored == state.chunks.end()) continue;
-                        const MeshChunk old = std::move(stored.value());
-                        stored.value() = std::move(rebuilt[i]);
-                        replaced[i] = 1;
-                      }
-                    });
   // Every waiting block is in the queue: when all of it was meshed, nothing waits.
   const bool all_done = done == queue.size();
   if (all_done) state.pending.clear();
   for (std::size_t i = 0; i < rebuilt.size(); ++i) {
-    const BlockKey key = rebuilt[i].key;
+    const BlockKey key = queue[i].second;
     if (!all_done) state.pending.erase(key);
     result.changed.push_back(key);
     if (replaced[i]) continue;
