@@ -495,6 +495,56 @@ TEST(MeshExtractor, RebuildsChangedBlocksAndTheirLowerNeighboursOnly) {
   EXPECT_EQ(extractor.triangleCount(), 0u);
 }
 
+// A re-meshed chunk is written into the stored chunk's arrays: a surface
+// block whose surface shrinks to one corner, one that gets a dense surface
+// and one emptied still give the full extraction's mesh, and the shrunk
+// chunk does not keep arrays sized for its old surface.
+TEST(MeshExtractor, RemeshedChunksOfAnySizeGiveTheFullExtraction) {
+  const Eigen::Vector3d centre(0.123, -0.456, 0.0789);
+  const double voxel = 0.05;
+  VoxelBlockGrid grid = sphereGrid(voxel, 8, centre, 1.0);
+  MeshExtractor extractor;
+  extractor.update(grid);
+  std::vector<const MeshChunk*> chunks = extractor.chunks();
+  ASSERT_GT(chunks.size(), 30u);
+  std::sort(chunks.begin(), chunks.end(),
+            [](const MeshChunk* a, const MeshChunk* b) { return a->triangles.size() > b->triangles.size(); });
+  const BlockKey shrinking = chunks.front()->key, growing = chunks.back()->key, emptied = chunks[chunks.size() / 2]->key;
+  const std::size_t largest = chunks.front()->triangles.size(), smallest = chunks.back()->triangles.size();
+  const uint64_t generation = grid.nextGeneration();
+  // Unobserved voxels (weight 0) end the surface inside the block.
+  const auto rewrite = [&](const BlockKey& key, const std::function<float(int, int, int)>& sdf,
+                           const std::function<bool(int, int, int)>& observed) {
+    VoxelBlock* block = grid.find(key);
+    for (int k = 0; k < 8; ++k)
+      for (int j = 0; j < 8; ++j)
+        for (int i = 0; i < 8; ++i) {
+          block->sdf[i + 8 * (j + 8 * k)] = sdf(i, j, k);
+          block->weight[i + 8 * (j + 8 * k)] = observed(i, j, k) ? 1.0f : 0.0f;
+        }
+    block->changed_generation = generation;
+  };
+  const float far = float(3 * voxel);
+  rewrite(
+      shrinking, [&](int i, int j, int k) { return i + j + k == 0 ? -far : far; },
+      [](int i, int j, int k) { return i < 2 && j < 2 && k < 2; });
+  rewrite(
+      growing, [&](int i, int j, int k) { return float(voxel * std::sin(2.1 * i + 1.3 * j) * std::cos(1.7 * k)); },
+      [](int, int, int) { return true; });
+  rewrite(
+      emptied, [&](int, int, int) { return far; }, [](int, int, int) { return false; });
+  extractor.update(grid);
+  expectSameMesh(extractor.combined(), extractMesh(grid));
+  const MeshChunk* shrunk = extractor.chunk(shrinking);
+  ASSERT_NE(shrunk, nullptr);
+  EXPECT_LT(4 * shrunk->triangles.size(), largest);
+  EXPECT_LE(shrunk->vertices.capacity(), 2 * shrunk->vertices.size() + 16);
+  EXPECT_LE(shrunk->triangles.capacity(), 2 * shrunk->triangles.size() + 16);
+  ASSERT_NE(extractor.chunk(growing), nullptr);
+  EXPECT_GT(extractor.chunk(growing)->triangles.size(), 4 * smallest);
+  EXPECT_EQ(extractor.chunk(emptied), nullptr);
+}
+
 // A lower neighbour reads only the first three voxel layers of a block
 // across the faces it lies below: it is re-meshed only when one of the
 // voxels it reads changed, and the mesh stays the full extraction's.

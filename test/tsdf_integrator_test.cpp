@@ -817,7 +817,7 @@ TEST(TsdfIntegrator, OneThreadAndTwoThreadsGiveTheSameGrid) {
 // drives only part of each touched block is projected (the cells a return's
 // band crossed, not the space under the ground or behind walls), and the
 // incremental mesh, updated after every scan with every change marked, is
-// the full extraction.
+// the full extraction after every scan.
 TEST(TsdfIntegrator, CellActivationProjectsPartOfEachBlockAndMeshesIncrementally) {
   for (const test::MappingPreset& preset : {test::outdoorCarPreset(), test::kittiLikePreset()}) {
     const test::SimulatedMappingSequence sequence = test::simulateMappingSequence(preset, 5, 4);
@@ -838,6 +838,11 @@ TEST(TsdfIntegrator, CellActivationProjectsPartOfEachBlockAndMeshesIncrementally
       updated += statistics.voxels_updated;
       EXPECT_LE(statistics.voxels_updated, statistics.voxels_selected) << preset.name << " scan " << k;
       extractor.update(grid);
+      if (k + 1 == sequence.scans.size()) continue;  // compared below
+      const TriangleMesh incremental = extractor.combined(), full = extractMesh(grid);
+      ASSERT_EQ(incremental.vertices, full.vertices) << preset.name << " scan " << k;
+      ASSERT_EQ(incremental.normals, full.normals) << preset.name << " scan " << k;
+      ASSERT_EQ(incremental.triangles, full.triangles) << preset.name << " scan " << k;
     }
     std::printf("%s: %zu voxels in the touched blocks, %zu of them selected, %zu written, over %zu sweeps\n",
                 preset.name.c_str(), block_voxels, selected, updated, sequence.scans.size());

@@ -18,6 +18,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cfloat>
 #include <cmath>
@@ -849,6 +850,32 @@ TriangleMesh weldChunks(const std::vector<const MeshChunk*>& chunks) {
   return weldViews(views, edge);
 }
 
+// `from` into `to`'s own arrays, which keep their capacity unless that is
+// over twice what `from` needs (a chunk does not hold on to the memory of
+// its largest version). The arrays are first made large enough, so a failed
+// allocation leaves `to` as it was.
+void copyChunk(const MeshChunk& from, MeshChunk& to) {
+  if (to.vertices.capacity() > 2 * from.vertices.size() + 16 ||
+      to.triangles.capacity() > 2 * from.triangles.size() + 16) {
+    MeshChunk smaller;
+    copyChunk(from, smaller);
+    to = std::move(smaller);
+    return;
+  }
+  to.vertices.reserve(from.vertices.size());
+  to.normals.reserve(from.normals.size());
+  to.intensities.reserve(from.intensities.size());
+  to.triangles.reserve(from.triangles.size());
+  to.vertex_edges.reserve(from.vertex_edges.size());
+  to.key = from.key;
+  to.block_edge = from.block_edge;
+  to.vertices.assign(from.vertices.begin(), from.vertices.end());
+  to.normals.assign(from.normals.begin(), from.normals.end());
+  to.intensities.assign(from.intensities.begin(), from.intensities.end());
+  to.triangles.assign(from.triangles.begin(), from.triangles.end());
+  to.vertex_edges.assign(from.vertex_edges.begin(), from.vertex_edges.end());
+}
+
 double secondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
@@ -1025,34 +1052,50 @@ MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
   };
   // A reset or replaced grid: what waits refers to blocks that may be gone.
   if (grid.generation() < meshed_generation_) state.pending.clear();
-  std::vector<BlockKey> gone;
-  for (const auto& [key, regions] : state.known_blocks)
-    if (!grid.find(key)) gone.push_back(key);
-  for (const BlockKey& key : gone) {
-    state.known_blocks.erase(key);
-    state.pending.erase(key);
-    if (state.chunks.erase(key)) state.unreported_removals.push_back(key);
-    for (int neighbour = 0; neighbour < 8; ++neighbour) mark(lowerNeighbour(key, neighbour));
-  }
   // Blocks whose cubes read a changed block: itself, and those of its 7 lower
   // neighbours that read a changed part of it.
-  // Every block of the map is looked at: both threads test, one collects in order.
+  // Every block of the map is looked at: both threads test, one collects in
+  // order. They count the known blocks still in the grid too: when that is
+  // all of them, none is gone, and finding the gone ones is skipped.
   const std::vector<const VoxelBlock*> blocks = grid.blocks();
+  // is_changed: bit 0 changed, bit 1 not known before this update.
   std::vector<uint8_t> is_changed(blocks.size());
+  std::atomic<std::size_t> known_in_grid{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 1024),
                     [&](const tbb::blocked_range<std::size_t>& range) {
-                      for (std::size_t i = range.begin(); i != range.end(); ++i)
-                        is_changed[i] = remesh_all || blocks[i]->changed_generation > meshed_generation_ ||
-                                        !state.known_blocks.count(blocks[i]->key);
+                      std::size_t known_here = 0;
+                      for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                        const bool known = state.known_blocks.count(blocks[i]->key) != 0;
+                        known_here += known;
+                        is_changed[i] = uint8_t(remesh_all || blocks[i]->changed_generation > meshed_generation_ ||
+                                                !known) |
+                                        uint8_t(!known) << 1;
+                      }
+                      known_in_grid += known_here;
                     });
+  if (known_in_grid < state.known_blocks.size()) {
+    std::vector<BlockKey> gone;
+    for (const auto& [key, regions] : state.known_blocks)
+      if (!grid.find(key)) gone.push_back(key);
+    for (const BlockKey& key : gone) {
+      state.known_blocks.erase(key);
+      state.pending.erase(key);
+      if (state.chunks.erase(key)) state.unreported_removals.push_back(key);
+      for (int neighbour = 0; neighbour < 8; ++neighbour) mark(lowerNeighbour(key, neighbour));
+    }
+  }
   std::vector<const VoxelBlock*> changed;
+  std::vector<uint8_t> is_new;
   for (std::size_t i = 0; i < blocks.size(); ++i)
-    if (is_changed[i]) changed.push_back(blocks[i]);
+    if (is_changed[i]) {
+      changed.push_back(blocks[i]);
+      is_new.push_back(is_changed[i] >> 1);
+    }
   const int edge = grid.blockEdge();
   const bool with_intensity = grid.options().store_intensity;
   const std::size_t voxels = std::size_t(grid.voxelsPerBlock());
   for (const VoxelBlock* block : changed) checkBlockArrays(*block, voxels, with_intensity);
-  for (const VoxelBlock* block : changed) mark(block->key);
+  for (const VoxelBlock* block : changed) state.pending.try_emplace(block->key, generation);  // in the grid: no find
   // A lower neighbour re-meshed anyway (changed itself, or waiting) reads
   // the block as it is, and its fingerprint is not worth computing; the
   // others are re-meshed when their region's fingerprint differs from the
@@ -1065,9 +1108,9 @@ MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
   };
   // New entries first (one thread: they change the map); then each changed
   // block's own entry and lookups, on both threads; the looks in order.
-  std::vector<uint8_t> is_new(changed.size()), to_look(changed.size());
+  std::vector<uint8_t> to_look(changed.size());
   for (std::size_t i = 0; i < changed.size(); ++i)
-    is_new[i] = state.known_blocks.try_emplace(changed[i]->key).second;
+    if (is_new[i]) state.known_blocks.try_emplace(changed[i]->key);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, changed.size(), 64),
                     [&](const tbb::blocked_range<std::size_t>& range) {
                       for (std::size_t i = range.begin(); i != range.end(); ++i) {
@@ -1077,7 +1120,8 @@ MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
                         for (int neighbour = 1; neighbour < 8; ++neighbour) {
                           const BlockKey lower = lowerNeighbour(changed[i]->key, neighbour);
                           const uint8_t bit = uint8_t(1u << (neighbour - 1));
-                          if (grid.find(lower) && !state.pending.count(lower))
+                          // Most are waiting (changed too): that map is the smaller one.
+                          if (!state.pending.count(lower) && grid.find(lower))
                             look |= bit;
                           else
                             regions.valid &= uint8_t(~bit);
@@ -1123,9 +1167,10 @@ MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
   std::size_t take = queue.size();
   if (budgeted && options_.max_blocks_per_update > 0) take = std::min(take, options_.max_blocks_per_update);
 
-  // Meshing may throw (a malformed block): no chunk is replaced before it is
-  // done, and what waited still waits.
+  // Meshing may throw (a malformed block): what waited still waits (chunks
+  // re-meshed before that hold their new triangles).
   std::vector<MeshChunk> rebuilt;
+  std::vector<uint8_t> replaced;
   rebuilt.reserve(take);
   std::size_t done = 0;
   while (done < take) {
@@ -1135,11 +1180,27 @@ MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
       batch = std::min(batch, kBlocksPerBudgetBatch);
     }
     rebuilt.resize(done + batch);
+    replaced.resize(done + batch, 0);
+    // A chunk that replaces a stored one is copied into that one's arrays
+    // (finds only: both threads): a block's new chunk is about as large as
+    // its last, so it costs no allocation, no fresh memory to fault in and
+    // no freeing of the old arrays. New and emptied chunks change the map:
+    // one thread, below.
     tbb::parallel_for(tbb::blocked_range<std::size_t>(done, done + batch, 4),
                       [&](const tbb::blocked_range<std::size_t>& range) {
                         BlockMesher& mesher = state.meshers.local();
-                        for (std::size_t i = range.begin(); i != range.end(); ++i)
-                          rebuilt[i] = mesher.mesh(grid, *grid.find(queue[i].second), options_);
+                        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                          const MeshChunk& built = mesher.build(grid, *grid.find(queue[i].second), options_);
+                          if (!built.triangles.empty()) {
+                            const auto stored = state.chunks.find(built.key);
+                            if (stored != state.chunks.end()) {
+                              copyChunk(built, stored.value());
+                              replaced[i] = 1;
+                              continue;
+                            }
+                          }
+                          copyChunk(built, rebuilt[i]);
+                        }
                       });
     done += batch;
   }
@@ -1147,24 +1208,12 @@ MeshUpdate MeshExtractor::update(const VoxelBlockGrid& grid, bool force_all) {
   result.removed.swap(state.unreported_removals);
   std::sort(result.removed.begin(), result.removed.end(), latticeKeyLess);
   result.changed.reserve(rebuilt.size());
-  // A chunk that replaces a stored one touches only that entry: both
-  // threads find it, trade places and free the old arrays (cold memory,
-  // five per chunk). New and emptied chunks change the map: one thread.
-  std::vector<uint8_t> replaced(rebuilt.size(), 0);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rebuilt.size(), 64),
-                    [&](const tbb::blocked_range<std::size_t>& range) {
-                      for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                        if (rebuilt[i].triangles.empty()) continue;
-                        const auto stored = state.chunks.find(rebuilt[i].key);
-                        if (stored == state.chunks.end()) continue;
-                        const MeshChunk old = std::move(stored.value());
-                        stored.value() = std::move(rebuilt[i]);
-                        replaced[i] = 1;
-                      }
-                    });
+  // Every waiting block is in the queue: when all of it was meshed, nothing waits.
+  const bool all_done = done == queue.size();
+  if (all_done) state.pending.clear();
   for (std::size_t i = 0; i < rebuilt.size(); ++i) {
-    const BlockKey key = rebuilt[i].key;
-    state.pending.erase(key);
+    const BlockKey key = queue[i].second;
+    if (!all_done) state.pending.erase(key);
     result.changed.push_back(key);
     if (replaced[i]) continue;
     if (rebuilt[i].triangles.empty())
