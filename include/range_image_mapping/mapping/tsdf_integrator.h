@@ -95,8 +95,9 @@ struct TsdfIntegratorOptions {
   // MeshOptions::min_weight) or changed sign, or the block's voxels drifted
   // by more than mesh_tolerance_voxels (the largest change per scan, summed
   // over scans) since the block was last marked. The incremental mesh then
-  // has the grid's topology and its vertices are within that tolerance of a
-  // full extraction's. 0 marks every change (exact).
+  // has the grid's topology, meshed from values within that tolerance of the
+  // grid's; a vertex interpolated between two close values of opposite sign
+  // can still move several times the tolerance. 0 marks every change (exact).
   double mesh_tolerance_voxels = 0.1;
   float mesh_min_weight = 0.0f;
   // Throws MappingError naming the field (truncation below one voxel or above
