@@ -126,6 +126,32 @@ inline void checkBlockArrays(const VoxelBlock& block, std::size_t voxels, bool i
     throwBadBlockArrays(block, voxels, intensity);
 }
 
+// `from` into `to`'s own arrays, which keep their capacity unless that is
+// over twice what `from` needs (a chunk does not hold on to the memory of
+// its largest version). The arrays are first made large enough, so a failed
+// allocation leaves `to` as it was.
+void copyChunk(const MeshChunk& from, MeshChunk& to) {
+  if (to.vertices.capacity() > 2 * from.vertices.size() + 16 ||
+      to.triangles.capacity() > 2 * from.triangles.size() + 16) {
+    MeshChunk smaller;
+    copyChunk(from, smaller);
+    to = std::move(smaller);
+    return;
+  }
+  to.vertices.reserve(from.vertices.size());
+  to.normals.reserve(from.normals.size());
+  to.intensities.reserve(from.intensities.size());
+  to.triangles.reserve(from.triangles.size());
+  to.vertex_edges.reserve(from.vertex_edges.size());
+  to.key = from.key;
+  to.block_edge = from.block_edge;
+  to.vertices.assign(from.vertices.begin(), from.vertices.end());
+  to.normals.assign(from.normals.begin(), from.normals.end());
+  to.intensities.assign(from.intensities.begin(), from.intensities.end());
+  to.triangles.assign(from.triangles.begin(), from.triangles.end());
+  to.vertex_edges.assign(from.vertex_edges.begin(), from.vertex_edges.end());
+}
+
 // Meshes one block at a time; one per thread, so its buffers are reused.
 //
 // The block's voxels and the first three voxel layers of its +1 neighbours
@@ -137,15 +163,8 @@ class BlockMesher {
   // build() fills: growing five fresh vectors per chunk cost more
   // allocations than the copy.
   MeshChunk mesh(const VoxelBlockGrid& grid, const VoxelBlock& block, const MeshOptions& options) {
-    const MeshChunk& built = build(grid, block, options);
     MeshChunk result;
-    result.key = built.key;
-    result.block_edge = built.block_edge;
-    result.vertices.assign(built.vertices.begin(), built.vertices.end());
-    result.normals.assign(built.normals.begin(), built.normals.end());
-    result.intensities.assign(built.intensities.begin(), built.intensities.end());
-    result.triangles.assign(built.triangles.begin(), built.triangles.end());
-    result.vertex_edges.assign(built.vertex_edges.begin(), built.vertex_edges.end());
+    copyChunk(build(grid, block, options), result);
     return result;
   }
 
@@ -848,32 +867,6 @@ TriangleMesh weldChunks(const std::vector<const MeshChunk*>& chunks) {
     }
   });
   return weldViews(views, edge);
-}
-
-// `from` into `to`'s own arrays, which keep their capacity unless that is
-// over twice what `from` needs (a chunk does not hold on to the memory of
-// its largest version). The arrays are first made large enough, so a failed
-// allocation leaves `to` as it was.
-void copyChunk(const MeshChunk& from, MeshChunk& to) {
-  if (to.vertices.capacity() > 2 * from.vertices.size() + 16 ||
-      to.triangles.capacity() > 2 * from.triangles.size() + 16) {
-    MeshChunk smaller;
-    copyChunk(from, smaller);
-    to = std::move(smaller);
-    return;
-  }
-  to.vertices.reserve(from.vertices.size());
-  to.normals.reserve(from.normals.size());
-  to.intensities.reserve(from.intensities.size());
-  to.triangles.reserve(from.triangles.size());
-  to.vertex_edges.reserve(from.vertex_edges.size());
-  to.key = from.key;
-  to.block_edge = from.block_edge;
-  to.vertices.assign(from.vertices.begin(), from.vertices.end());
-  to.normals.assign(from.normals.begin(), from.normals.end());
-  to.intensities.assign(from.intensities.begin(), from.intensities.end());
-  to.triangles.assign(from.triangles.begin(), from.triangles.end());
-  to.vertex_edges.assign(from.vertex_edges.begin(), from.vertex_edges.end());
 }
 
 double secondsSince(std::chrono::steady_clock::time_point start) {
