@@ -469,6 +469,113 @@ TEST(Recording, MalformedFilesNameTheProblem) {
   fs::remove_all(folder);
 }
 
+// A scan file that cannot be read, in the middle of a real KITTI folder: with
+// statistics it is skipped and named, and the scans after it keep their place
+// (frame id, stamp) and their images; without, its reader's error goes on.
+TEST(Recording, AnUnreadableScanIsSkippedAndNamed) {
+  RIM_REQUIRE_DATA(velodyne, "kitti-raw-22/velodyne");
+  const KittiCopy copy = kittiCopy(velodyne, 6, {"/velodyne_points"});
+  io::RecordingOptions options;
+  options.input = (copy.folder / "scans").string();
+  options.sensor = "HDL-64E";
+  const std::vector<RangeImage> intact = scansOf(options);
+  ASSERT_EQ(intact.size(), 6u);
+  const fs::path damaged = copy.folder / "scans" / fs::path(copy.files[3]).filename();
+  fs::resize_file(damaged, fs::file_size(damaged) - 5);  // not a whole number of points
+  const io::Recording recording = io::openRecording(options);
+  EXPECT_THROW(scansOf(recording), io::KittiFormatError);
+  io::RecordingStatistics statistics;
+  std::vector<RangeImage> images;
+  io::forEachScan(
+      recording,
+      [&](const RangeImage& image) {
+        images.push_back(image);
+        return true;
+      },
+      &statistics);
+  ASSERT_EQ(images.size(), 5u);
+  EXPECT_EQ(statistics.scans, 5u);
+  EXPECT_EQ(statistics.unreadable, 1u);
+  ASSERT_EQ(statistics.unreadable_examples.size(), 1u);
+  EXPECT_TRUE(contains(statistics.unreadable_examples[0], damaged.filename().string()))
+      << statistics.unreadable_examples[0];
+  const std::vector<std::size_t> places = {0, 1, 2, 4, 5};
+  for (std::size_t k = 0; k < images.size(); ++k) {
+    EXPECT_EQ(images[k].frame_id, places[k]);
+    EXPECT_EQ(images[k].stamp_ns, intact[places[k]].stamp_ns);
+    EXPECT_EQ(rangeMd5(images[k]), rangeMd5(intact[places[k]])) << k;
+  }
+  const std::string warning = io::readingLossWarning(statistics);
+  EXPECT_TRUE(contains(warning, "1 scan could not be read") && contains(warning, damaged.filename().string()))
+      << warning;
+  io::RecordingStatistics whole;
+  io::forEachScan(
+      io::openRecording(options), [](const RangeImage&) { return true; }, &whole);
+  EXPECT_EQ(whole.unreadable, 1u);
+
+  // The model estimated from the first clouds skips it too.
+  options.sensor.clear();
+  options.estimation_scans = 4;
+  const io::Recording estimated = io::openRecording(options);
+  EXPECT_TRUE(contains(estimated.model_info.summary, "estimated from the first 4 scans"))
+      << estimated.model_info.summary;
+
+  // None readable: the first one's error, with or without statistics.
+  for (const std::string& file : copy.files) {
+    const fs::path scan = copy.folder / "scans" / fs::path(file).filename();
+    fs::resize_file(scan, fs::file_size(scan) - 3);
+  }
+  const std::string none = errorOf([&] { io::openRecording(options); });
+  EXPECT_TRUE(contains(none, fs::path(copy.files[0]).filename().string()) && contains(none, "multiple of 16"))
+      << none;
+  fs::remove_all(copy.folder);
+}
+
+// A capture cut off mid-record (a real Ouster pcap, truncated): the scans
+// before the cut are given and the early end is said; the intact capture
+// reads without a loss to report, also when --frames stops it early.
+TEST(Recording, ACaptureCutOffGivesItsScansAndSaysSo) {
+  RIM_REQUIRE_DATA(pcap, "ouster-pcaps/OS-1-128_v2.3.0_1024x10_lb_n3.pcap");
+  RIM_REQUIRE_DATA(json, "ouster-pcaps/OS-1-128_v2.3.0_1024x10.json");
+  io::RecordingOptions options;
+  options.input = pcap;
+  options.metadata = json;
+  io::RecordingStatistics intact;
+  const std::size_t all = io::forEachScan(
+      io::openRecording(options), [](const RangeImage&) { return true; }, &intact);
+  ASSERT_GE(all, 3u);
+  EXPECT_EQ(io::readingLossWarning(intact), "");
+  ASSERT_TRUE(intact.pcap && intact.packets);
+  EXPECT_EQ(intact.packets->scans, all);
+
+  io::RecordingOptions first = options;
+  first.frames = 1;
+  io::RecordingStatistics limited;
+  EXPECT_EQ(io::forEachScan(
+                io::openRecording(first), [](const RangeImage&) { return true; }, &limited),
+            1u);
+  EXPECT_EQ(io::readingLossWarning(limited), "");
+  ASSERT_TRUE(limited.packets);
+  EXPECT_LT(limited.packets->packets, intact.packets->packets);  // it stopped reading at the first scan
+
+  const fs::path folder = freshFolder("cut");
+  const fs::path cut = folder / "cut.pcap";
+  fs::copy_file(pcap, cut);
+  fs::resize_file(cut, fs::file_size(cut) * 3 / 4);
+  options.input = cut.string();
+  io::RecordingStatistics statistics;
+  const std::size_t given = io::forEachScan(
+      io::openRecording(options), [](const RangeImage&) { return true; }, &statistics);
+  EXPECT_GT(given, 0u);
+  EXPECT_LE(given, all);
+  EXPECT_FALSE(statistics.stopped_early.empty());
+  ASSERT_TRUE(statistics.packets);
+  EXPECT_LT(statistics.packets->packets, intact.packets->packets);
+  const std::string warning = io::readingLossWarning(statistics);
+  EXPECT_TRUE(contains(warning, "stopped early, after " + std::to_string(given) + " scans")) << warning;
+  fs::remove_all(folder);
+}
+
 // rim itself: the bag of plain PointCloud2 and the folder of the same scans
 // give the same trajectory, with the estimated model logged once; rim decode
 // reads a folder of PCD scans.
@@ -504,6 +611,38 @@ TEST_F(RecordingCommand, BagAndFolderOfTheSameScansGiveTheSameTrajectory) {
   ASSERT_EQ(decode.exit_code, 0) << decode.err << decode.out;
   EXPECT_TRUE(fs::exists(path("decoded/scan_000001.ply")));
   EXPECT_TRUE(contains(decode.out, "2 scans written")) << decode.out;
+  fs::remove_all(copy.folder);
+}
+
+// rim odometry and rim map over a folder with a damaged scan: the others are
+// processed and written, the damaged one is named in a warning and in the
+// JSON, and rim map still matches scans to poses by their place.
+TEST_F(RecordingCommand, ADamagedScanIsNamedAndTheRestWritten) {
+  RIM_REQUIRE_DATA(velodyne, "kitti-raw-22/velodyne");
+  const KittiCopy copy = kittiCopy(velodyne, 6, {"/velodyne_points"});
+  const std::string scans = (copy.folder / "scans").string();
+  const test::RunResult intact = rim("odometry " + scans + " --sensor HDL-64E --out " + path("intact.txt"));
+  ASSERT_EQ(intact.exit_code, 0) << intact.err;
+  EXPECT_FALSE(contains(intact.err, "could not be read")) << intact.err;
+  const fs::path damaged = copy.folder / "scans" / fs::path(copy.files[2]).filename();
+  fs::resize_file(damaged, fs::file_size(damaged) - 7);
+  const test::RunResult odometry = rim("odometry " + scans + " --sensor HDL-64E --out " + path("traj.txt"));
+  ASSERT_EQ(odometry.exit_code, 0) << odometry.err;
+  EXPECT_TRUE(contains(odometry.err, "warning: 1 scan could not be read") &&
+              contains(odometry.err, damaged.filename().string()))
+      << odometry.err;
+  const auto poses = io::readKittiPosesWithTimes(path("traj.txt"));
+  ASSERT_EQ(poses.size(), 5u);
+  EXPECT_NEAR(poses[2].time_s, copy.times_s[3], 1e-6);  // the scan after the damaged one keeps its time
+  const std::string summary = test::readText(path("traj_summary.json"));
+  EXPECT_TRUE(contains(summary, "\"unreadable\" : 1")) << summary;
+
+  const test::RunResult map = rim("map " + scans + " --sensor HDL-64E --poses " + path("intact.txt") + " --out " +
+                                  path("mesh.ply") + " --json " + path("map.json"));
+  ASSERT_EQ(map.exit_code, 0) << map.err;
+  EXPECT_TRUE(contains(map.out, "5 scans (5 integrated")) << map.out;
+  EXPECT_TRUE(contains(map.err, damaged.filename().string())) << map.err;
+  EXPECT_TRUE(contains(test::readText(path("map.json")), "\"unreadable\" : 1"));
   fs::remove_all(copy.folder);
 }
 

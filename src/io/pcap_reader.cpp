@@ -325,7 +325,7 @@ bool anyDatagramToPort(const std::string& pcap_path, int port) {
 }  // namespace
 
 OusterPcapStatistics readOusterScans(const std::string& pcap_path, const OusterMetadata& metadata,
-                                     const ScanBatcher::ScanCallback& on_scan) {
+                                     const ScanBatcher::ScanCallback& on_scan, const bool* stop) {
   OusterPcapStatistics statistics;
   ScanBatcher batcher(metadata, on_scan);
   const std::size_t lidar_size = batcher.format().packetSize();
@@ -341,11 +341,12 @@ OusterPcapStatistics readOusterScans(const std::string& pcap_path, const OusterM
     if (lidar) {
       ++statistics.lidar_datagrams;
       batcher.addPacket(datagram.payload, datagram.size);
+      if (stop && *stop) break;
     } else {
       ++statistics.other_datagrams;
     }
   }
-  batcher.flush();
+  if (!(stop && *stop)) batcher.flush();
   statistics.pcap = reader.statistics();
   statistics.batcher = batcher.statistics();
   return statistics;

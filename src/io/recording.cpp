@@ -19,6 +19,7 @@
 #include <cmath>
 #include <filesystem>
 #include <cstdio>
+#include <exception>
 #include <fstream>
 #include <map>
 
@@ -95,10 +96,16 @@ void chooseCloudModel(Recording& recording, const RecordingOptions& options) {
   Recording first = recording;
   first.frames = scans;
   std::vector<PointCloudInput> clouds;
-  forEachCloud(first, [&](const PointCloudInput& cloud) {
-    clouds.push_back(cloud);
-    return true;
-  });
+  // A cloud that cannot be read is left out here and reported by the run
+  // that reads them all; none readable throws the first one's error.
+  RecordingStatistics skipped;
+  forEachCloud(
+      first,
+      [&](const PointCloudInput& cloud) {
+        clouds.push_back(cloud);
+        return true;
+      },
+      &skipped);
   RecordingModel& info = recording.model_info;
   std::string fix;
   if (!options.sensor.empty()) {
@@ -295,34 +302,77 @@ Recording openRecording(const RecordingOptions& options) {
   return recording;
 }
 
-std::size_t forEachCloud(const Recording& recording, const std::function<bool(const PointCloudInput&)>& on_cloud) {
+namespace {
+
+// forEachCloud with each cloud's place in the recording (file or message
+// index), which skipped clouds do not shift.
+std::size_t forEachIndexedCloud(const Recording& recording,
+                                const std::function<bool(const PointCloudInput&, std::size_t)>& on_cloud,
+                                RecordingStatistics* statistics) {
   if (!isPointCloudRecording(recording.kind))
     throw RecordingError("INPUT " + recording.input + " holds Ouster packets, not point clouds");
   const std::size_t limit = recording.frames > 0 ? std::size_t(recording.frames) : SIZE_MAX;
-  std::size_t given = 0;
+  std::size_t given = 0, index = 0;
+  // A cloud that cannot be read is counted and skipped when statistics are
+  // kept, else its error goes on; the first one's error is thrown when no
+  // cloud could be read.
+  std::exception_ptr first_error;
+  const auto failed = [&](const std::exception_ptr& error, const std::string& name, const std::string& reason) {
+    if (!statistics) std::rethrow_exception(error);
+    if (!first_error) first_error = error;
+    ++statistics->unreadable;
+    if (statistics->unreadable_examples.size() < RecordingStatistics::kUnreadableExamples)
+      statistics->unreadable_examples.push_back(name + ": " + reason);
+  };
   if (limit == 0) return 0;
   if (recording.kind == RecordingKind::kPointCloudBag) {
     const BagReader bag(recording.bag);
     PointCloudInput cloud;
-    return bag.forEachPointCloud(recording.topic, [&](const BagPointCloud& message) {
+    try {
+      bag.forEachPointCloud(recording.topic, [&](const BagPointCloud& message) {
+        const std::size_t message_index = index++;
+        try {
+          readPointCloud(message.layout, message.data, message.size, message.header_stamp_ns, cloud);
+        } catch (const PointCloudError& error) {
+          const std::string message = "message " + std::to_string(message_index) + " on " + recording.topic;
+          failed(std::make_exception_ptr(PointCloudLayoutError(std::string(error.what()) + " (" + message + " in " +
+                                                               recording.bag + ")")),
+                 message, error.what());
+          return true;
+        }
+        ++given;
+        return on_cloud(cloud, message_index) && given < limit;
+      });
+    } catch (const BagError& error) {
+      // Damage after the first cloud: what came before it is kept.
+      if (!statistics || given == 0) throw;
+      statistics->stopped_early = error.what();
+    }
+  } else {
+    const std::vector<std::string>& files =
+        recording.kind == RecordingKind::kKittiVelodyne ? recording.velodyne_files : recording.cloud_files;
+    for (; index < files.size() && given < limit; ++index) {
+      PointCloudInput cloud;
       try {
-        readPointCloud(message.layout, message.data, message.size, message.header_stamp_ns, cloud);
-      } catch (const PointCloudLayoutError& error) {
-        throw PointCloudLayoutError(std::string(error.what()) + " (message " + std::to_string(given) + " on " +
-                                    recording.topic + " in " + recording.bag + ")");
+        cloud = readCloudFile(files[index], fileStamp(recording, index));
+      } catch (const std::runtime_error& error) {  // the readers' format errors, and files that cannot be opened
+        failed(std::current_exception(), fs::path(files[index]).filename().string(), error.what());
+        continue;
       }
       ++given;
-      return on_cloud(cloud) && given < limit;
-    });
+      if (!on_cloud(cloud, index)) break;
+    }
   }
-  const std::vector<std::string>& files =
-      recording.kind == RecordingKind::kKittiVelodyne ? recording.velodyne_files : recording.cloud_files;
-  for (std::size_t frame = 0; frame < files.size() && given < limit; ++frame) {
-    const PointCloudInput cloud = readCloudFile(files[frame], fileStamp(recording, frame));
-    ++given;
-    if (!on_cloud(cloud)) break;
-  }
+  if (given == 0 && first_error) std::rethrow_exception(first_error);
   return given;
+}
+
+}  // namespace
+
+std::size_t forEachCloud(const Recording& recording, const std::function<bool(const PointCloudInput&)>& on_cloud,
+                         RecordingStatistics* statistics) {
+  return forEachIndexedCloud(
+      recording, [&](const PointCloudInput& cloud, std::size_t) { return on_cloud(cloud); }, statistics);
 }
 
 std::size_t forEachScan(const Recording& recording, const std::function<bool(const RangeImage&)>& on_scan,
@@ -331,62 +381,116 @@ std::size_t forEachScan(const Recording& recording, const std::function<bool(con
   std::size_t given = 0;
   if (limit == 0) return 0;
   if (!isPointCloudRecording(recording.kind)) {
-    struct Stop {};
     RangeImage image;
+    bool stopped = false;
     const auto emit = [&](const LidarScan& scan) {
+      if (stopped) return;
       toRangeImage(scan, recording.model, ReturnIndex::kFirst, image);
       ++given;
       if (statistics) ++statistics->scans;
-      if (!on_scan(image) || given >= limit) throw Stop{};
+      stopped = !on_scan(image) || given >= limit;
     };
-    try {
-      if (recording.kind == RecordingKind::kOusterCapture) {
-        readOusterScans(recording.pcap, *recording.ouster, emit);
-      } else {
-        ScanBatcher batcher(*recording.ouster, emit);
-        std::size_t packet_size = 0;
-        BagReader(recording.bag).forEachOusterPacket(recording.topic, [&](const BagPacket& packet) {
-          packet_size = packet.size;
-          batcher.addPacket(packet.data, packet.size);
-          return true;
-        });
-        batcher.flush();
-        const BatcherStatistics& packets = batcher.statistics();
-        if (given == 0 && packets.wrong_size > 0)
-          throw RecordingError("INPUT " + recording.input + ": the " + std::to_string(packets.wrong_size) +
-                               " packets on " + recording.topic + " (" + std::to_string(packet_size) +
-                               " bytes) are not the metadata's lidar packets (" +
-                               std::to_string(batcher.format().packetSize()) +
-                               " bytes): an IMU topic, or metadata of another sensor or mode?");
+    if (recording.kind == RecordingKind::kOusterCapture) {
+      const OusterPcapStatistics packets = readOusterScans(recording.pcap, *recording.ouster, emit, &stopped);
+      if (statistics) {
+        statistics->pcap = packets.pcap;
+        statistics->packets = packets.batcher;
+        statistics->stopped_early = packets.pcap.stopped_early;
       }
-    } catch (const Stop&) {
+      return given;
     }
+    ScanBatcher batcher(*recording.ouster, emit);
+    std::size_t packet_size = 0;
+    try {
+      BagReader(recording.bag).forEachOusterPacket(recording.topic, [&](const BagPacket& packet) {
+        packet_size = packet.size;
+        batcher.addPacket(packet.data, packet.size);
+        return !stopped;
+      });
+    } catch (const BagError& error) {
+      // Damage after the first scan: what came before it is kept.
+      if (!statistics || given == 0) throw;
+      statistics->stopped_early = error.what();
+    }
+    if (!stopped) batcher.flush();
+    const BatcherStatistics& packets = batcher.statistics();
+    if (statistics) statistics->packets = packets;
+    if (given == 0 && packets.wrong_size > 0)
+      throw RecordingError("INPUT " + recording.input + ": the " + std::to_string(packets.wrong_size) +
+                           " packets on " + recording.topic + " (" + std::to_string(packet_size) +
+                           " bytes) are not the metadata's lidar packets (" +
+                           std::to_string(batcher.format().packetSize()) +
+                           " bytes): an IMU topic, or metadata of another sensor or mode?");
     return given;
   }
   if (!recording.model) throw RecordingError("INPUT " + recording.input + " was opened without a sensor model");
   const std::vector<int>& ring_to_row = recording.model_info.ring_to_row;
-  forEachCloud(recording, [&](const PointCloudInput& cloud) {
-    const std::size_t frame = given;
-    ProjectionStatistics projection;
-    RangeImage image = !ring_to_row.empty() && !cloud.ring.empty()
-                           ? projectPointCloud(cloud, recording.model, ring_to_row, &projection)
-                           : projectPointCloud(cloud, recording.model, &projection);
-    image.frame_id = uint32_t(frame);
-    if (statistics) {
-      statistics->projection.add(projection);
-      ++statistics->scans;
-    }
-    // rim simulate's column times make the simulated scans deskewable; real
-    // KITTI scans carry no point times, so they stay as they are.
-    if (frame < recording.column_times.size() &&
-        recording.column_times[frame].size() == std::size_t(recording.model->columns())) {
-      image.column_timestamp_ns = recording.column_times[frame];
-      image.stamp_ns = 0;  // the first valid column's time, as for Ouster scans
-    }
-    ++given;
-    return on_scan(image);
-  });
+  forEachIndexedCloud(
+      recording,
+      [&](const PointCloudInput& cloud, std::size_t frame) {
+        ProjectionStatistics projection;
+        RangeImage image = !ring_to_row.empty() && !cloud.ring.empty()
+                               ? projectPointCloud(cloud, recording.model, ring_to_row, &projection)
+                               : projectPointCloud(cloud, recording.model, &projection);
+        image.frame_id = uint32_t(frame);
+        if (statistics) {
+          statistics->projection.add(projection);
+          ++statistics->scans;
+        }
+        // rim simulate's column times make the simulated scans deskewable; real
+        // KITTI scans carry no point times, so they stay as they are.
+        if (frame < recording.column_times.size() &&
+            recording.column_times[frame].size() == std::size_t(recording.model->columns())) {
+          image.column_timestamp_ns = recording.column_times[frame];
+          image.stamp_ns = 0;  // the first valid column's time, as for Ouster scans
+        }
+        ++given;
+        return on_scan(image);
+      },
+      statistics);
   return given;
+}
+
+std::string readingLossWarning(const RecordingStatistics& statistics) {
+  std::string warning;
+  const auto add = [&](const std::string& sentence) { warning += (warning.empty() ? "" : " ") + sentence; };
+  if (statistics.unreadable > 0) {
+    std::string examples;
+    for (const std::string& example : statistics.unreadable_examples)
+      examples += (examples.empty() ? "" : "; ") + example;
+    add(std::to_string(statistics.unreadable) + " scan" + (statistics.unreadable == 1 ? "" : "s") +
+        " could not be read and " + (statistics.unreadable == 1 ? "was" : "were") + " skipped (" + examples +
+        (statistics.unreadable > statistics.unreadable_examples.size() ? "; ..." : "") + "): the results leave " +
+        (statistics.unreadable == 1 ? "it" : "them") + " out.");
+  }
+  if (!statistics.stopped_early.empty())
+    add("Reading stopped early, after " + std::to_string(statistics.scans) +
+        " scans, at damage in the recording (" + statistics.stopped_early +
+        "): the rest of it is not in the results.");
+  if (statistics.pcap) {
+    const PcapStatistics& pcap = *statistics.pcap;
+    if (pcap.skipped_truncated + pcap.skipped_malformed + pcap.fragments_dropped > 0)
+      add(std::to_string(pcap.skipped_truncated) + " truncated and " + std::to_string(pcap.skipped_malformed) +
+          " malformed records and " + std::to_string(pcap.fragments_dropped) +
+          " fragments of incomplete datagrams in the capture were left out (a capture with a snap length "
+          "shorter than the packets, or a damaged file).");
+  }
+  if (statistics.packets) {
+    const BatcherStatistics& packets = *statistics.packets;
+    const std::size_t dropped = packets.wrong_size + packets.malformed + packets.bad_checksum;
+    if (dropped > 0)
+      add(std::to_string(dropped) + " lidar packets were dropped (" + std::to_string(packets.wrong_size) +
+          " of another size than the metadata's, " + std::to_string(packets.malformed) + " malformed, " +
+          std::to_string(packets.bad_checksum) +
+          " with a wrong checksum): check that the metadata is this sensor's and mode's.");
+    if (packets.incomplete_scans > 0)
+      add(std::to_string(packets.incomplete_scans) + " of " + std::to_string(packets.scans) +
+          " scans miss columns (" + std::to_string(packets.missing_columns) +
+          " in all): packets lost before the recording (network, or a recorder that fell behind)" +
+          (statistics.stopped_early.empty() ? "" : ", or the scan the damage cut short") +
+          "; those columns are left empty.");
+  }
+  return warning;
 }
 
 std::string poseFileFrame(const std::string& poses_path) {

@@ -62,7 +62,8 @@ BagReader::BagReader(const std::string& path) : state_(std::make_unique<State>()
       state_->topics.push_back(topic);
     }
   } catch (const rosbag::BagException& error) {
-    throw BagError("bag " + path + ": " + error.what());
+    throw BagError("bag " + path + ": " + error.what() +
+                   " (a bag cut off while recording has no index: rosbag reindex rebuilds it)");
   }
 }
 

@@ -78,6 +78,7 @@ int runDecodeRecording(const DecodeOptions& options) {
         return true;
       },
       &statistics);
+  reportReading(statistics);
   const ProjectionStatistics& projection = statistics.projection;
   if (projection.input_points > 0)
     std::printf("%d scans written to %s; of %zu measured points %.1f %% kept, %.1f %% outside the model's field of "

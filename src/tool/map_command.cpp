@@ -170,31 +170,40 @@ int runMap(const MapCommandOptions& options) {
   };
 
   auto read_started = Clock::now();
-  io::forEachScan(recording, [&](const RangeImage& scan) {
-    times.read += secondsSince(read_started);
-    const std::size_t index = scans++;
-    if (index < poses.size()) {
-      if (has_pending) {
-        const double dt_s = (double(pipeline.scanTime(scan)) - double(pipeline.scanTime(pending))) * 1e-9;
-        twist = twistBetween(poses[pending_index], poses[index], dt_s);
-        integratePending();
-      }
-      pending = scan;  // reuses the buffers
-      pending_index = index;
-      has_pending = true;
-    }
-    read_started = Clock::now();
-    return true;  // scans past the poses are only counted, for the error
-  });
+  io::RecordingStatistics reading;
+  // A point cloud's place in the recording is its pose's index, also after
+  // clouds that could not be read (skipped).
+  const bool clouds = io::isPointCloudRecording(recording.kind);
+  io::forEachScan(
+      recording,
+      [&](const RangeImage& scan) {
+        times.read += secondsSince(read_started);
+        const std::size_t index = clouds ? std::size_t(scan.frame_id) : scans;
+        ++scans;
+        if (index < poses.size()) {
+          if (has_pending) {
+            const double dt_s = (double(pipeline.scanTime(scan)) - double(pipeline.scanTime(pending))) * 1e-9;
+            twist = twistBetween(poses[pending_index], poses[index], dt_s);
+            integratePending();
+          }
+          pending = scan;  // reuses the buffers
+          pending_index = index;
+          has_pending = true;
+        }
+        read_started = Clock::now();
+        return true;  // scans past the poses are only counted, for the error
+      },
+      &reading);
   try {
-    checkPoseCount(poses.size(), scans, limited && scans == std::size_t(recording.frames), poses_path,
-                   recording.input);
+    checkPoseCount(poses.size(), scans + reading.unreadable, limited && scans == std::size_t(recording.frames),
+                   poses_path, recording.input);
   } catch (const std::invalid_argument&) {
     finishProgress();  // the error on a line of its own
     throw;
   }
   if (has_pending) integratePending();
   if (recording.expected_frames <= 0 || int(scans) != recording.expected_frames) finishProgress();
+  const Json::Value reading_json = reportReading(reading);
   if (scans == 0) throw std::runtime_error("no scans in " + recording.input);
   if (integrated == 0)
     throw std::runtime_error("no scan was integrated: all " + std::to_string(refused) + " were refused (" +
@@ -215,6 +224,7 @@ int runMap(const MapCommandOptions& options) {
   report["mesh"] = options.output;
   report["options"] = mapOptionsJson(options.map, !options.no_deskew);
   report["scans"] = Json::UInt64(scans);
+  report["reading"] = reading_json;
   report["scans_integrated"] = Json::UInt64(integrated);
   report["scans_refused"] = Json::UInt64(refused);
   report["warnings"] = Json::UInt64(warnings);
@@ -237,11 +247,11 @@ int runMap(const MapCommandOptions& options) {
   report["wall_seconds"] = secondsSince(started);
   if (!options.json.empty()) writeJsonFile(options.json, report);
 
-  std::cout << scans << " scans (" << integrated << " integrated, " << refused << " refused); "
-            << statistics.blocks << " blocks, " << double(statistics.memory_bytes) / (1 << 20) << " MiB; "
-            << mesh.triangles.size() << " triangles; integrate " << 1e3 * times.integrate / double(integrated + refused)
-            << " ms/scan, read " << 1e3 * times.read / double(scans) << " ms/scan, mesh " << times.mesh
-            << " s; written to " << options.output << (options.json.empty() ? "" : ", " + options.json) << "\n";
+  std::cout << scans << " scans (" << integrated << " integrated, " << refused << " refused); " << statistics.blocks
+            << " blocks, " << double(statistics.memory_bytes) / (1 << 20) << " MiB; " << mesh.triangles.size()
+            << " triangles; integrate " << 1e3 * times.integrate / double(integrated + refused) << " ms/scan, read "
+            << 1e3 * times.read / double(scans) << " ms/scan, mesh " << times.mesh << " s; written to "
+            << options.output << (options.json.empty() ? "" : ", " + options.json) << "\n";
   if (!evaluation_line.empty()) std::cout << evaluation_line << "\n";
   return 0;
 }

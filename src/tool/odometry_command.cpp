@@ -50,20 +50,25 @@ int runOdometry(const OdometryCommandOptions& options) {
   int frames = 0;
   OdometryHealth health;
   const auto started = std::chrono::steady_clock::now();
-  io::forEachScan(recording, [&](const RangeImage& scan) {
-    const registration::OdometryUpdate update = odometry.process(scan);
-    const double time_s = double(update.stamp_ns) * 1e-9;
-    if (!update.skipped) poses.push_back({time_s, update.pose});
-    step_seconds.push_back(update.seconds);
-    health.add(update);
-    frames_file.add(frames, update);
-    if (!update.warning.empty()) std::cerr << "\nwarning: frame " << frames << ": " << update.warning << "\n";
-    ++frames;
-    showProgress(frames, recording.expected_frames, started);
-    return true;
-  });
+  io::RecordingStatistics reading;
+  io::forEachScan(
+      recording,
+      [&](const RangeImage& scan) {
+        const registration::OdometryUpdate update = odometry.process(scan);
+        const double time_s = double(update.stamp_ns) * 1e-9;
+        if (!update.skipped) poses.push_back({time_s, update.pose});
+        step_seconds.push_back(update.seconds);
+        health.add(update);
+        frames_file.add(frames, update);
+        if (!update.warning.empty()) std::cerr << "\nwarning: frame " << frames << ": " << update.warning << "\n";
+        ++frames;
+        showProgress(frames, recording.expected_frames, started);
+        return true;
+      },
+      &reading);
   if (recording.expected_frames <= 0 || frames != recording.expected_frames) finishProgress();
   frames_file.close();
+  const Json::Value reading_json = reportReading(reading);
   if (frames == 0) throw std::runtime_error("no scans in " + recording.input);
   const double total_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
 
@@ -77,6 +82,7 @@ int runOdometry(const OdometryCommandOptions& options) {
   summary["input"] = recording.input;
   summary["frames"] = frames;
   summary["poses"] = Json::UInt64(poses.size());
+  summary["reading"] = reading_json;
   const Json::Value health_json = health.json();
   for (const std::string& key : health_json.getMemberNames()) summary[key] = health_json[key];
   const Json::Value odometry_json = options.odometry.json(recording.model.get());
@@ -84,7 +90,8 @@ int runOdometry(const OdometryCommandOptions& options) {
   summary["frame"] = options.frame == "sensor" ? "os_sensor" : recording.frame;
   summary["step_seconds_mean"] = mean_seconds;
   summary["step_seconds_median"] = median(step_seconds);
-  summary["step_seconds_max"] = step_seconds.empty() ? 0.0 : *std::max_element(step_seconds.begin(), step_seconds.end());
+  summary["step_seconds_max"] =
+      step_seconds.empty() ? 0.0 : *std::max_element(step_seconds.begin(), step_seconds.end());
   summary["steps_per_second"] = mean_seconds > 0 ? 1.0 / mean_seconds : 0.0;
   summary["wall_seconds"] = total_seconds;
   summary["poses_kitti"] = options.output;
@@ -93,9 +100,9 @@ int runOdometry(const OdometryCommandOptions& options) {
   const std::string summary_path = siblingPath(options.output, "summary.json");
   writeJsonFile(summary_path, summary);
 
-  std::cout << frames << " scans, " << poses.size() << " poses (" << health.line() << "); odometry step " << mean_seconds * 1e3 << " ms mean, "
-            << median(step_seconds) * 1e3 << " ms median; written to " << options.output << ", " << tum_path
-            << ", " << frames_path << ", " << summary_path << "\n";
+  std::cout << frames << " scans, " << poses.size() << " poses (" << health.line() << "); odometry step "
+            << mean_seconds * 1e3 << " ms mean, " << median(step_seconds) * 1e3 << " ms median; written to "
+            << options.output << ", " << tum_path << ", " << frames_path << ", " << summary_path << "\n";
   return reportHealth(health);
 }
 

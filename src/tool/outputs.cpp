@@ -92,6 +92,30 @@ void reportSensorModel(const io::Recording& recording) {
   if (!model.warning.empty()) std::cerr << "warning: " << model.warning << "\n";
 }
 
+Json::Value reportReading(const io::RecordingStatistics& reading) {
+  Json::Value json;
+  json["scans"] = Json::UInt64(reading.scans);
+  json["unreadable"] = Json::UInt64(reading.unreadable);
+  Json::Value& examples = json["unreadable_examples"] = Json::arrayValue;
+  for (const std::string& example : reading.unreadable_examples) examples.append(example);
+  json["stopped_early"] = reading.stopped_early;
+  if (reading.packets) {
+    json["packets_dropped"] =
+        Json::UInt64(reading.packets->wrong_size + reading.packets->malformed + reading.packets->bad_checksum);
+    json["incomplete_scans"] = Json::UInt64(reading.packets->incomplete_scans);
+    json["missing_columns"] = Json::UInt64(reading.packets->missing_columns);
+  }
+  if (reading.pcap) {
+    json["pcap_records_truncated"] = Json::UInt64(reading.pcap->skipped_truncated);
+    json["pcap_records_malformed"] = Json::UInt64(reading.pcap->skipped_malformed);
+    json["pcap_fragments_dropped"] = Json::UInt64(reading.pcap->fragments_dropped);
+  }
+  const std::string warning = io::readingLossWarning(reading);
+  json["warning"] = warning;
+  if (!warning.empty()) std::cerr << "warning: " << warning << "\n";
+  return json;
+}
+
 void addOdometryOptions(Command& command, OdometryCommandLine& odometry) {
   command.flag("--no-deskew", odometry.no_deskew, "register and map the scans as measured");
   command.option("--deskew-passes", odometry.deskew_passes,

@@ -34,6 +34,12 @@ void addRecordingOptions(Command& command, io::RecordingOptions& recording, cons
 // Says once, on stderr, what the recording's sensor model is and how well it
 // explains the first clouds, with the warning when it explains too little.
 void reportSensorModel(const io::Recording& recording);
+// What reading the recording lost (scans that could not be read and were
+// skipped, packets dropped, scans missing columns, an early end at damage):
+// says it once on stderr as a warning naming the loss and what to check, and
+// returns it as JSON for the command's summary or report ("warning": "" when
+// nothing was lost).
+Json::Value reportReading(const io::RecordingStatistics& reading);
 
 // Odometry settings on the command line (rim odometry, rim run).
 struct OdometryCommandLine {

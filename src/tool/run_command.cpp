@@ -150,6 +150,8 @@ struct RunRecord {
   double read_seconds = 0, odometry_seconds = 0, integrate_seconds = 0, mesh_seconds = 0;
   int frames = 0, refused = 0;
   OdometryHealth health;
+  io::RecordingStatistics reading;
+  Json::Value reading_json;
 };
 
 // A preset is simulated into out/sequence first; anything else is read as it is.
@@ -181,35 +183,40 @@ RunRecord runScans(pipeline::ScanToMapPipeline& pipeline, const io::Recording& r
   const auto previous_handler = std::signal(SIGINT, [](int) { interrupted = true; });
   const auto loop_started = Clock::now();
   auto read_started = Clock::now();
-  io::forEachScan(recording, [&](const RangeImage& scan) {
-    run.read_seconds += secondsSince(read_started);
-    const pipeline::ScanResult result = pipeline.process(scan);
-    const registration::OdometryUpdate& update = *result.odometry;
-    frames_file.add(run.frames, update);
-    run.odometry_seconds += result.odometry_seconds;
-    run.integrate_seconds += result.integrate_seconds;
-    run.health.add(update);
-    run.refused += result.map && !result.map->integrated;
-    for (const std::string& warning : result.warnings)
-      if (warnings++ < 20) std::cerr << "\nwarning: frame " << run.frames << ": " << warning << "\n";
-    if (result.has_pose) {
-      const double time_s = double(result.scan_time_ns) * 1e-9;
-      run.poses.push_back({time_s, result.world_from_lidar});
-      run.records.push_back({time_s, 1e3 * result.odometry_seconds, 1e3 * result.integrate_seconds, update.inliers});
-    }
-    if (result.mesh) {
-      run.mesh_update_ms.push_back(1e3 * result.mesh_seconds);
-      run.mesh_seconds += result.mesh_seconds;
-    }
-    ++run.frames;
-    showProgress(run.frames, recording.expected_frames, loop_started);
-    read_started = Clock::now();
-    return !interrupted;
-  });
+  io::forEachScan(
+      recording,
+      [&](const RangeImage& scan) {
+        run.read_seconds += secondsSince(read_started);
+        const pipeline::ScanResult result = pipeline.process(scan);
+        const registration::OdometryUpdate& update = *result.odometry;
+        frames_file.add(run.frames, update);
+        run.odometry_seconds += result.odometry_seconds;
+        run.integrate_seconds += result.integrate_seconds;
+        run.health.add(update);
+        run.refused += result.map && !result.map->integrated;
+        for (const std::string& warning : result.warnings)
+          if (warnings++ < 20) std::cerr << "\nwarning: frame " << run.frames << ": " << warning << "\n";
+        if (result.has_pose) {
+          const double time_s = double(result.scan_time_ns) * 1e-9;
+          run.poses.push_back({time_s, result.world_from_lidar});
+          run.records.push_back(
+              {time_s, 1e3 * result.odometry_seconds, 1e3 * result.integrate_seconds, update.inliers});
+        }
+        if (result.mesh) {
+          run.mesh_update_ms.push_back(1e3 * result.mesh_seconds);
+          run.mesh_seconds += result.mesh_seconds;
+        }
+        ++run.frames;
+        showProgress(run.frames, recording.expected_frames, loop_started);
+        read_started = Clock::now();
+        return !interrupted;
+      },
+      &run.reading);
   std::signal(SIGINT, previous_handler);
   if (recording.expected_frames <= 0 || run.frames != recording.expected_frames) finishProgress();
   frames_file.close();
   if (interrupted) std::cerr << "interrupted after " << run.frames << " scans: saving what there is\n";
+  run.reading_json = reportReading(run.reading);
   if (run.poses.empty()) throw std::runtime_error("no usable scans in " + recording.input);
   return run;
 }
@@ -342,6 +349,7 @@ int runPipeline(RunCommandOptions options, const Command& command) {
   report["interrupted"] = bool(interrupted);
   report["frames"] = run.frames;
   report["poses"] = Json::UInt64(run.poses.size());
+  report["reading"] = run.reading_json;
   report["odometry"] = options.odometry.json(recording.model.get());
   const Json::Value health = run.health.json();
   for (const std::string& key : health.getMemberNames()) report["odometry"][key] = health[key];
@@ -359,9 +367,9 @@ int runPipeline(RunCommandOptions options, const Command& command) {
 
   std::optional<GroundTruthComparison> comparison;
   if (!recording.ground_truth.poses.empty()) {
-    comparison = compareWithGroundTruth(recording, run.poses, mesh, options.map.grid.voxel_size_m,
-                                        options.map.integrator.max_range_m,
-                                        (out / "mesh_in_ground_truth_frame.ply").string());
+    comparison =
+        compareWithGroundTruth(recording, run.poses, mesh, options.map.grid.voxel_size_m,
+                               options.map.integrator.max_range_m, (out / "mesh_in_ground_truth_frame.ply").string());
     report["ground_truth"] = groundTruthJson(*comparison);
   }
   report["wall_seconds"] = secondsSince(started);

@@ -46,21 +46,29 @@ std::vector<PointCloudInput> readClouds(const SensorCommandOptions& options, std
   recording_options.choose_model = false;
   const io::Recording recording = io::openRecording(recording_options);
   *description = recording.description;
+  io::RecordingStatistics reading;
   if (io::isPointCloudRecording(recording.kind)) {
-    io::forEachCloud(recording, [&](const PointCloudInput& cloud) {
-      clouds.push_back(cloud);
-      return true;
-    });
-    return clouds;
+    io::forEachCloud(
+        recording,
+        [&](const PointCloudInput& cloud) {
+          clouds.push_back(cloud);
+          return true;
+        },
+        &reading);
+  } else {
+    io::forEachScan(
+        recording,
+        [&](const RangeImage& image) {
+          PointCloudInput cloud;
+          for (int v = 0; v < image.rows(); ++v)
+            for (int u = 0; u < image.columns(); ++u)
+              if (image.valid(v, u)) cloud.points.push_back(image.model->unproject(u, v, image.at(v, u)));
+          clouds.push_back(std::move(cloud));
+          return static_cast<int>(clouds.size()) < options.frames;
+        },
+        &reading);
   }
-  io::forEachScan(recording, [&](const RangeImage& image) {
-    PointCloudInput cloud;
-    for (int v = 0; v < image.rows(); ++v)
-      for (int u = 0; u < image.columns(); ++u)
-        if (image.valid(v, u)) cloud.points.push_back(image.model->unproject(u, v, image.at(v, u)));
-    clouds.push_back(std::move(cloud));
-    return static_cast<int>(clouds.size()) < options.frames;
-  });
+  reportReading(reading);
   return clouds;
 }
 

@@ -80,8 +80,10 @@ struct OusterPcapStatistics {
 // Reads a capture into scans: datagrams to metadata.udp_port_lidar (or of the
 // lidar packet size, see classified_by_size) go through a ScanBatcher, which is
 // flushed at the end. Throws PcapError for files that cannot be read.
+// stop, when given, is looked at after each packet: once true, reading ends
+// there (no flush) with the statistics so far.
 OusterPcapStatistics readOusterScans(const std::string& pcap_path, const OusterMetadata& metadata,
-                                     const ScanBatcher::ScanCallback& on_scan);
+                                     const ScanBatcher::ScanCallback& on_scan, const bool* stop = nullptr);
 
 // Every scan of a capture that has any column, as range images sharing one
 // model of the metadata. Throws like readOusterScans.

@@ -7,9 +7,11 @@
 // says where a simulated folder keeps its ground truth.
 #pragma once
 
+#include "range_image_mapping/io/pcap_reader.h"
 #include "range_image_mapping/ouster_metadata.h"
 #include "range_image_mapping/point_cloud_projection.h"
 #include "range_image_mapping/range_image.h"
+#include "range_image_mapping/scan_batcher.h"
 #include "range_image_mapping/sensor_model_estimation.h"
 
 #include <cstddef>
@@ -112,11 +114,27 @@ struct Recording {
 // from its clouds; the readers' errors for files that cannot be read.
 Recording openRecording(const RecordingOptions& options);
 
-// What the point clouds of a recording held, summed over the scans given.
+// What reading a recording gave and lost, over the scans given.
 struct RecordingStatistics {
   ProjectionStatistics projection;  // point-cloud recordings
   std::size_t scans = 0;
+  // Point-cloud recordings: clouds that could not be read (a malformed file or
+  // message), skipped; the first kUnreadableExamples of them as "name: reason".
+  static constexpr std::size_t kUnreadableExamples = 5;
+  std::size_t unreadable = 0;
+  std::vector<std::string> unreadable_examples;
+  // Ouster recordings: what the capture's records held (pcap only) and what
+  // the batcher made of the packets (dropped, scans with columns missing).
+  std::optional<PcapStatistics> pcap;
+  std::optional<BatcherStatistics> packets;
+  // Reading ended before the recording did (a capture or bag damaged or cut
+  // off mid-record): why. The scans before it were given.
+  std::string stopped_early;
 };
+
+// "" when reading lost nothing; else one sentence per loss, what was lost and
+// what to check, for rim's warnings and reports.
+std::string readingLossWarning(const RecordingStatistics& statistics);
 
 // Calls on_scan with each scan in order (the image is reused between calls)
 // until it returns false or `frames` scans were given; returns how many were
@@ -124,14 +142,21 @@ struct RecordingStatistics {
 // ring map when the cloud has rings), stamped from their points' times, else
 // the bag's header stamps, else times.txt (or 10 Hz); in a rim simulate
 // folder they get their column times so they can be deskewed. statistics,
-// when given, sums what the projections kept and lost.
+// when given, sums what the projections kept and lost and what reading lost:
+// then a cloud that cannot be read is skipped and counted (its image's
+// frame_id stays its place in the recording), and a recording damaged after
+// its first scan ends early with the scans before the damage given; without
+// it they throw the reader's error. A recording none of whose clouds can be
+// read throws the first one's error either way.
 std::size_t forEachScan(const Recording& recording, const std::function<bool(const RangeImage&)>& on_scan,
                         RecordingStatistics* statistics = nullptr);
 
 // The clouds of a point-cloud recording, in order and stamped as forEachScan
-// stamps them, until on_cloud returns false or `frames` were given. Throws
-// RecordingError for an Ouster recording.
-std::size_t forEachCloud(const Recording& recording, const std::function<bool(const PointCloudInput&)>& on_cloud);
+// stamps them, until on_cloud returns false or `frames` were given; what
+// cannot be read as forEachScan says. Throws RecordingError for an Ouster
+// recording.
+std::size_t forEachCloud(const Recording& recording, const std::function<bool(const PointCloudInput&)>& on_cloud,
+                         RecordingStatistics* statistics = nullptr);
 
 // The frame a pose file says it holds: its KITTI sidecar's "frame", or a TUM
 // "# frame: ..." header line; "" when it says nothing.
