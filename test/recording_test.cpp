@@ -80,12 +80,15 @@ fs::path freshFolder(const std::string& name) {
   return folder;
 }
 
-std::vector<RangeImage> scansOf(const io::Recording& recording) {
+std::vector<RangeImage> scansOf(const io::Recording& recording, io::RecordingStatistics* statistics = nullptr) {
   std::vector<RangeImage> images;
-  io::forEachScan(recording, [&](const RangeImage& image) {
-    images.push_back(image);
-    return true;
-  });
+  io::forEachScan(
+      recording,
+      [&](const RangeImage& image) {
+        images.push_back(image);
+        return true;
+      },
+      statistics);
   return images;
 }
 
@@ -414,14 +417,7 @@ TEST(Recording, PcdFolderWithRingsGetsAModelFromItsRings) {
   EXPECT_GT(recording.model_info.fit->keptShare(), 0.99) << recording.model_info.summary;
   EXPECT_TRUE(recording.model_info.warning.empty()) << recording.model_info.warning;
   io::RecordingStatistics statistics;
-  std::vector<RangeImage> images;
-  io::forEachScan(
-      recording,
-      [&](const RangeImage& image) {
-        images.push_back(image);
-        return true;
-      },
-      &statistics);
+  const std::vector<RangeImage> images = scansOf(recording, &statistics);
   ASSERT_EQ(images.size(), 3u);
   EXPECT_EQ(statistics.scans, 3u);
   EXPECT_EQ(statistics.projection.measured(), measured);
@@ -485,14 +481,7 @@ TEST(Recording, AnUnreadableScanIsSkippedAndNamed) {
   const io::Recording recording = io::openRecording(options);
   EXPECT_THROW(scansOf(recording), io::KittiFormatError);
   io::RecordingStatistics statistics;
-  std::vector<RangeImage> images;
-  io::forEachScan(
-      recording,
-      [&](const RangeImage& image) {
-        images.push_back(image);
-        return true;
-      },
-      &statistics);
+  const std::vector<RangeImage> images = scansOf(recording, &statistics);
   ASSERT_EQ(images.size(), 5u);
   EXPECT_EQ(statistics.scans, 5u);
   EXPECT_EQ(statistics.unreadable, 1u);
