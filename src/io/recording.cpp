@@ -334,10 +334,10 @@ std::size_t forEachIndexedCloud(const Recording& recording,
         try {
           readPointCloud(message.layout, message.data, message.size, message.header_stamp_ns, cloud);
         } catch (const PointCloudError& error) {
-          const std::string message = "message " + std::to_string(message_index) + " on " + recording.topic;
-          failed(std::make_exception_ptr(PointCloudLayoutError(std::string(error.what()) + " (" + message + " in " +
+          const std::string where = "message " + std::to_string(message_index) + " on " + recording.topic;
+          failed(std::make_exception_ptr(PointCloudLayoutError(std::string(error.what()) + " (" + where + " in " +
                                                                recording.bag + ")")),
-                 message, error.what());
+                 where, error.what());
           return true;
         }
         ++given;
