@@ -18,7 +18,7 @@
 // Usage: long_drive_memory_benchmark [--frames 36000] [--beams 128|64]
 //          [--columns 512|1024|2048] [--memory-radius 40] [--keep-dropped-mesh]
 //          [--mesh-every 10] [--sample-every 1000] [--scene-extent 1000]
-//          [--threads 2] [--csv FILE]
+//          [--threads 2] [--block-edge 8|16] [--csv FILE]
 #include "command_line.h"
 #include "machine_info.h"
 #include "simulated_mapping_sequence.h"
@@ -66,6 +66,7 @@ struct Options {
   int sample_every = 1000;
   double scene_extent_m = 1000.0;  // the largest street grid the generator makes: the longest lap
   int threads = 2;
+  int block_edge = mapping::VoxelBlockGridOptions{}.block_edge;
   std::string csv;
 };
 
@@ -81,6 +82,7 @@ void printUsage() {
       "  --sample-every N      memory sample every N scans (default 1000)\n"
       "  --scene-extent M      side of the street grid, 120-1000 m (default 1000)\n"
       "  --threads N           TBB threads (default 2)\n"
+      "  --block-edge 8|16     voxels per block edge (default: the grid's default)\n"
       "  --csv FILE            also write the samples as CSV\n");
 }
 
@@ -97,6 +99,7 @@ Options parseOptions(int argc, char** argv) {
     else if (name == "--sample-every") options.sample_every = arguments.integer();
     else if (name == "--scene-extent") options.scene_extent_m = arguments.number();
     else if (name == "--threads") options.threads = arguments.integer();
+    else if (name == "--block-edge") options.block_edge = arguments.integer();
     else if (name == "--csv") options.csv = arguments.value();
     else if (name == "--help" || name == "-h") {
       printUsage();
@@ -301,6 +304,7 @@ int run(int argc, char** argv) {
 
   mapping::TsdfMapOptions map_options;
   map_options.grid.voxel_size_m = preset.voxel_m;
+  map_options.grid.block_edge = options.block_edge;
   map_options.integrator.min_range_m = preset.min_range_m;
   map_options.integrator.max_range_m = preset.max_range_m;
   map_options.memory_radius_m = options.memory_radius_m;
@@ -315,11 +319,11 @@ int run(int argc, char** argv) {
 
   std::printf("outdoor_car, %d scans of %s (%d x %d) at 10 Hz = %.1f simulated minutes, on the fly in memory;\n"
               "scene %.0f m street grid (%zu triangles), route lap %.2f km, looped; set-up %.1f s.\n"
-              "map: voxel %.2f m, clip %.0f m, memory_radius %.0f m (0 = keep all), keep_dropped_mesh %s, "
+              "map: voxel %.2f m, block edge %d, clip %.0f m, memory_radius %.0f m (0 = keep all), keep_dropped_mesh %s, "
               "mesh update every %d scans.\n",
               options.frames, model->intrinsics().sensor_model.c_str(), model->rows(), model->columns(),
               options.frames / kFrequencyHz / 60.0, options.scene_extent_m, scene.mesh.triangles.size(),
-              lap_m / 1e3, setup_s, preset.voxel_m, preset.max_range_m, options.memory_radius_m,
+              lap_m / 1e3, setup_s, preset.voxel_m, options.block_edge, preset.max_range_m, options.memory_radius_m,
               options.keep_dropped_mesh ? "true" : "false", options.mesh_every);
   std::printf("The map's memory depends on the area mapped around the sensor (radius, clip, voxel), not on the\n"
               "sensor's resolution: fewer beams or columns make the hour cheaper to simulate, the memory curve\n"

@@ -31,7 +31,7 @@
 // Prints times and ratios; never asserts a time.
 //
 // Usage: vdbfusion_comparison_benchmark [--frames 300] [--sequences outdoor_car,kitti_like]
-//          [--threads 2] [--no-peer]
+//          [--threads 2] [--block-edge 8|16] [--no-peer]
 #include "command_line.h"
 #include "machine_info.h"
 #include "simulated_mapping_sequence.h"
@@ -71,6 +71,7 @@ struct Options {
   std::vector<std::string> sequences{"outdoor_car", "kitti_like"};
   int threads = 2;
   bool peer = true;
+  int block_edge = mapping::VoxelBlockGridOptions{}.block_edge;
 };
 
 struct MeshScore {
@@ -102,9 +103,11 @@ MeshScore scoreMesh(const std::string& name, const TriangleMesh& mesh, double ex
   return score;
 }
 
-SystemRun runOurs(const test::MappingPreset& preset, const test::SimulatedMappingSequence& sequence) {
+SystemRun runOurs(const test::MappingPreset& preset, const test::SimulatedMappingSequence& sequence,
+                  int block_edge) {
   mapping::VoxelBlockGridOptions grid_options;
   grid_options.voxel_size_m = preset.voxel_m;
+  grid_options.block_edge = block_edge;
   mapping::VoxelBlockGrid grid(grid_options);
   mapping::TsdfIntegratorOptions integrator_options;
   integrator_options.truncation_m = kTruncationM;
@@ -220,13 +223,17 @@ int run(int argc, char** argv) {
     } else if (argument == "--threads") {
       options.threads = arguments.integer();
       if (options.threads < 1) throw std::invalid_argument("--threads: at least 1");
+    } else if (argument == "--block-edge") {
+      options.block_edge = arguments.integer();
+      if (options.block_edge != 8 && options.block_edge != 16) throw std::invalid_argument("--block-edge: 8 or 16");
     } else if (argument == "--no-peer") {
       options.peer = false;
     } else if (argument == "-h" || argument == "--help") {
-      std::printf("Usage: %s [--frames 300] [--sequences outdoor_car,kitti_like] [--threads 2] [--no-peer]\n"
+      std::printf("Usage: %s [--frames 300] [--sequences outdoor_car,kitti_like] [--threads 2] [--block-edge 8|16] [--no-peer]\n"
                   "  --frames N      consecutive scans per sequence (10 Hz)\n"
                   "  --sequences     comma-separated: outdoor_car (OS1-128), kitti_like (HDL-64E)\n"
                   "  --threads       TBB threads for ours (VDBFusion is single-threaded as it is)\n"
+                  "  --block-edge    voxels per block edge for ours (default: the grid's default)\n"
                   "  --no-peer       ours only (profiling)\n",
                   argv[0]);
       return 0;
@@ -262,10 +269,10 @@ int run(int argc, char** argv) {
     std::printf("%-12s %-16s %7s %8s %8s %8s %8s %8s %8s %8s %9s %6s %6s %6s\n", "sequence", "system", "threads",
                 "int ms", "median", "cpu ms", "upd med", "upd p95", "upd max", "full ms", "kilo-tri", "P@3", "R@3",
                 "F@3");
-    const SystemRun ours = runOurs(preset, sequence);
+    const SystemRun ours = runOurs(preset, sequence, options.block_edge);
     printRun(preset.name, options.threads, ours);
     const double block_voxels =
-        mean(ours.blocks_touched) * std::pow(mapping::VoxelBlockGridOptions{}.block_edge, 3);
+        mean(ours.blocks_touched) * std::pow(options.block_edge, 3);
     std::printf("%s: rim per scan: %.0f blocks integrated (%.0f voxels), %.0f voxels projected (%.0f %%, the "
                 "activated cells), %.0f written (%.0f %%), %.0f chunks re-meshed\n",
                 preset.name.c_str(), mean(ours.blocks_touched), block_voxels, mean(ours.voxels_selected),

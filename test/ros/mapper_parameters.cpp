@@ -49,7 +49,7 @@ TEST(MapperParameters, DefaultsWhenNothingIsSet) {
 TEST(MapperParameters, ValuesReachTheCoreOptions) {
   ros::NodeHandle node("~set");
   node.setParam("voxel_size", 0.05);
-  node.setParam("block_edge", 16);
+  node.setParam("block_edge", 8);
   node.setParam("truncation", 0.2);
   node.setParam("min_range", 1);  // an integer where a double is expected is fine
   node.setParam("max_range", 20.0);
@@ -62,7 +62,7 @@ TEST(MapperParameters, ValuesReachTheCoreOptions) {
   node.setParam("world_frame", "map");
   node.setParam("deskew", false);
   node.setParam("mesh_rate", 5);
-  node.setParam("marker_chunk_blocks", 2);
+  node.setParam("marker_chunk_blocks", 4);
   node.setParam("signed_distance", "along_ray");
   node.setParam("mesh_tolerance", 0.0);
   node.setParam("mesh_update_budget", 0.015);
@@ -79,7 +79,7 @@ TEST(MapperParameters, ValuesReachTheCoreOptions) {
   EXPECT_EQ(parameters.map.mesh.min_weight, 1.0f);
   EXPECT_EQ(parameters.map.integrator.mesh_min_weight, 1.0f);
   EXPECT_EQ(parameters.map.grid.voxel_size_m, 0.05);
-  EXPECT_EQ(parameters.map.grid.block_edge, 16);
+  EXPECT_EQ(parameters.map.grid.block_edge, 8);
   EXPECT_EQ(parameters.map.integrator.truncation_m, 0.2);
   EXPECT_EQ(parameters.map.integrator.min_range_m, 1.0);
   EXPECT_EQ(parameters.map.integrator.max_range_m, 20.0);
@@ -93,7 +93,7 @@ TEST(MapperParameters, ValuesReachTheCoreOptions) {
   EXPECT_EQ(parameters.world_frame, "map");
   EXPECT_FALSE(parameters.deskew);
   EXPECT_EQ(parameters.mesh_rate_hz, 5.0);
-  EXPECT_EQ(parameters.marker_chunk_blocks, 2);
+  EXPECT_EQ(parameters.marker_chunk_blocks, 4);
 }
 
 template <typename Value>

@@ -160,7 +160,7 @@ struct MapperParameters {
   double height_color_min_m = -1.0;  // colour scale of color_mode height, world z
   double height_color_max_m = 3.0;
   double intensity_color_max = 255.0;  // intensity of the brightest colour (color_mode intensity)
-  int marker_chunk_blocks = 4;  // one marker per cube of this many blocks per edge
+  int marker_chunk_blocks = 2;  // one marker per cube of this many blocks per edge (3.2 m at 16 x 10 cm)
   // Display only (markers and surface_points): triangles with a corner above
   // this world z are left out, so rviz shows rooms without their ceilings.
   // The map and saved meshes keep everything.
