@@ -162,6 +162,7 @@ class MapperNodelet : public nodelet::Nodelet {
   Eigen::Vector3f sensor_position_ = Eigen::Vector3f::Zero();  // of the last scan integrated: the display's viewpoint
   std::optional<uint32_t> last_frame_counter_;  // LidarRangeImage::frame_id of the last scan received
   double last_latency_s_ = 0.0;                 // of the last scan integrated
+  int scans_since_mesh_tick_ = 0;               // integrated (with a latency) since the last mesh timer callback
   int deferred_in_a_row_ = 0;
   // Diagnostics window maxima (reset by diagnose).
   double max_latency_s_ = 0.0;
@@ -305,6 +306,7 @@ void MapperNodelet::integrate(const LidarRangeImage& message, const LidarPose& l
     const double latency_s = (ros::Time::now() - message.header.stamp).toSec();
     if (latency_s > -1.0 && latency_s < 3600.0) {
       last_latency_s_ = latency_s;
+      ++scans_since_mesh_tick_;
       statistics_.latency_seconds += latency_s;
       ++statistics_.latencies;
       max_latency_s_ = std::max(max_latency_s_, latency_s);
@@ -337,8 +339,13 @@ void MapperNodelet::updateMesh() {
 }
 
 void MapperNodelet::onMeshTimer(const ros::SteadyTimerEvent&) {
-  // Behind: the scans waiting in the subscriber queue come first.
-  if (parameters_.mesh_defer_latency_s > 0.0 && last_latency_s_ > parameters_.mesh_defer_latency_s &&
+  // Behind: the scans waiting in the subscriber queue come first. Only while
+  // scans keep coming: once none came since the last tick (the replay or the
+  // sensor stopped, the backlog is gone) the last scan's latency says
+  // nothing about scans waiting, and the mesh catches up at once.
+  const bool scans_came = scans_since_mesh_tick_ > 0;
+  scans_since_mesh_tick_ = 0;
+  if (scans_came && parameters_.mesh_defer_latency_s > 0.0 && last_latency_s_ > parameters_.mesh_defer_latency_s &&
       deferred_in_a_row_ < kMaxDeferredMeshUpdates) {
     ++deferred_in_a_row_;
     ++statistics_.mesh_deferred;
