@@ -99,7 +99,12 @@ Options parseOptions(int argc, char** argv) {
     else if (name == "--sample-every") options.sample_every = arguments.integer();
     else if (name == "--scene-extent") options.scene_extent_m = arguments.number();
     else if (name == "--threads") options.threads = arguments.integer();
-    else if (name == "--block-edge") options.block_edge = arguments.integer();
+    else if (name == "--block-edge") {
+      options.block_edge = arguments.integer();
+      mapping::VoxelBlockGridOptions grid;  // refused here, before the scene is built
+      grid.block_edge = options.block_edge;
+      grid.validate();
+    }
     else if (name == "--csv") options.csv = arguments.value();
     else if (name == "--help" || name == "-h") {
       printUsage();

@@ -225,7 +225,9 @@ int run(int argc, char** argv) {
       if (options.threads < 1) throw std::invalid_argument("--threads: at least 1");
     } else if (argument == "--block-edge") {
       options.block_edge = arguments.integer();
-      if (options.block_edge != 8 && options.block_edge != 16) throw std::invalid_argument("--block-edge: 8 or 16");
+      mapping::VoxelBlockGridOptions grid;  // refused here, before the sequences are simulated
+      grid.block_edge = options.block_edge;
+      grid.validate();
     } else if (argument == "--no-peer") {
       options.peer = false;
     } else if (argument == "-h" || argument == "--help") {
