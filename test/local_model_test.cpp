@@ -303,9 +303,10 @@ TEST(LocalModel, NormalsDependOnlyOnTheKeyframesHeld) {
   }
 }
 
-// The model's normals are summed on several threads: the same keyframes
-// must give bit-identical normals on one thread and on four.
-TEST(LocalModel, NormalsFromTheModelDoNotDependOnTheThreads) {
+// The model's normals are summed on several threads, and the render
+// z-buffers in lanes whose number follows the threads: the same keyframes
+// must give bit-identical rendered points and normals on one thread and on four.
+TEST(LocalModel, ModelNormalsAndRenderDoNotDependOnTheThreads) {
   const std::vector<int> strides{2, 1};
   const std::vector<VertexNormalMap> flat = pyramid(floorScan(), strides);
   const std::vector<VertexNormalMap> tilted = pyramid(floorScan(float(3.0 * kDegree)), strides);
@@ -328,12 +329,17 @@ TEST(LocalModel, NormalsFromTheModelDoNotDependOnTheThreads) {
   for (std::size_t l = 0; l < strides.size(); ++l) {
     EXPECT_GT(pixelsWithNormals(one[l]), validPixels(flat[l]) / 5) << "stride " << strides[l];
     ASSERT_EQ(one[l].normals.size(), four[l].normals.size());
+    ASSERT_EQ(one[l].points.size(), four[l].points.size());
     for (std::size_t p = 0; p < one[l].normals.size(); ++p)
       for (int axis = 0; axis < 3; ++axis) {
         const float a = one[l].normals[p][axis], b = four[l].normals[p][axis];
         ASSERT_TRUE(a == b || (std::isnan(a) && std::isnan(b)))
             << "stride " << strides[l] << " pixel " << p << ": " << one[l].normals[p].transpose() << " against "
             << four[l].normals[p].transpose();
+        const float x = one[l].points[p][axis], y = four[l].points[p][axis];
+        ASSERT_TRUE(x == y || (std::isnan(x) && std::isnan(y)))
+            << "stride " << strides[l] << " pixel " << p << ": point " << one[l].points[p].transpose()
+            << " against " << four[l].points[p].transpose();
       }
   }
 }

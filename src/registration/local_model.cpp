@@ -6,6 +6,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <Eigen/Eigenvalues>
 
@@ -45,12 +46,11 @@ uint32_t rangeBits(float range) {
   return bits;
 }
 
-void keepSmallest(uint32_t& slot, uint32_t value) {
-  uint32_t current = __atomic_load_n(&slot, __ATOMIC_RELAXED);
-  while (value < current &&
-         !__atomic_compare_exchange_n(&slot, &current, value, true, __ATOMIC_RELAXED, __ATOMIC_RELAXED)) {
-  }
-}
+// Render lanes: consecutive runs of the points, each with z-buffers of its
+// own (plain minimums; shared buffers needed atomic compare-and-swap, whose
+// cache lines the two cores took from each other), merged per pixel after.
+// A few lanes per thread balance the load.
+constexpr std::size_t kLanesPerThread = 2;
 
 // render's pass 1 per chunk of points: the moved points as x, y, z arrays
 // and their pixels, left uninitialised (a ProjectedPixel array would be
@@ -486,8 +486,6 @@ void LocalModel::render(const LidarModel& model, const Eigen::Isometry3d& odom_f
     const std::size_t size = std::size_t(level.rows) * level.columns;
     std::vector<uint32_t>& nearest = nearest_[l];
     std::vector<uint32_t>& winner = winner_[l];
-    nearest.assign(size, kNoRange);
-    winner.assign(size, kNoPoint);
     first_point_.assign(keyframes_.size() + 1, 0);
     for (std::size_t k = 0; k < keyframes_.size(); ++k)
       first_point_[k + 1] = first_point_[k] + keyframe(k).levels[l].points.size();
@@ -499,59 +497,91 @@ void LocalModel::render(const LidarModel& model, const Eigen::Isometry3d& odom_f
     // indexing costs more than the transform in the per-pixel loop below).
     level_points_.resize(keyframes_.size());
     for (std::size_t k = 0; k < keyframes_.size(); ++k) level_points_[k] = &keyframe(k).levels[l];
+    first_chunk_.assign(keyframes_.size() + 1, 0);
+    for (std::size_t k = 0; k < keyframes_.size(); ++k)
+      first_chunk_[k + 1] = first_chunk_[k] + (keyframe(k).levels[l].points.size() + kChunk - 1) / kChunk;
+    const std::size_t chunks = first_chunk_.back();
+    const std::size_t lanes = std::max<std::size_t>(
+        1, std::min(chunks, kLanesPerThread * std::size_t(tbb::this_task_arena::max_concurrency())));
+    // Lane n takes the chunks [lane_first(n), lane_first(n + 1)), so its
+    // points' numbers all come before lane n + 1's.
+    const auto lane_first = [&](std::size_t n) { return chunks * n / lanes; };
+    // The number of chunk c's first point (all points' count for c = chunks).
+    const auto first_number = [&](std::size_t c) {
+      std::size_t k = 0;
+      while (k < keyframes_.size() && c >= first_chunk_[k + 1]) ++k;
+      return k == keyframes_.size() ? first_point_.back() : first_point_[k] + (c - first_chunk_[k]) * kChunk;
+    };
+    lane_buffers_.resize(std::max(lane_buffers_.size(), lanes));
+    const auto each_lane = [&](auto&& body) {
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, lanes, 1), [&](const tbb::blocked_range<std::size_t>& range) {
+        for (std::size_t n = range.begin(); n < range.end(); ++n) body(n, lane_buffers_[n]);
+      });
+    };
+    // Each pixel's minimum over the lanes' buffers.
+    const auto merge_lanes = [&](std::vector<uint32_t>& merged) {
+      merged.resize(size);
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, size, 8192), [&](const tbb::blocked_range<std::size_t>& block) {
+        for (std::size_t p = block.begin(); p < block.end(); ++p) {
+          uint32_t least = lane_buffers_[0][p];
+          for (std::size_t n = 1; n < lanes; ++n) least = std::min(least, lane_buffers_[n][p]);
+          merged[p] = least;
+        }
+      });
+    };
 
     // Pass 1: every point's pixel and range, and each pixel's nearest range.
     // Points without a normal take part in the z-buffer (they occlude) but
     // cannot win a pixel: they get no pixel for pass 2.
-    // All keyframes' chunks in one parallel loop (the coarse levels have few
-    // points each).
-    first_chunk_.assign(keyframes_.size() + 1, 0);
-    for (std::size_t k = 0; k < keyframes_.size(); ++k)
-      first_chunk_[k + 1] = first_chunk_[k] + (keyframe(k).levels[l].points.size() + kChunk - 1) / kChunk;
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, first_chunk_.back(), 1),
-                      [&](const tbb::blocked_range<std::size_t>& chunks) {
-                        ChunkBuffers chunk;
-                        for (std::size_t c = chunks.begin(); c < chunks.end(); ++c) {
-                          std::size_t k = 0;
-                          while (c >= first_chunk_[k + 1]) ++k;
-                          const Level& points = *level_points_[k];
-                          const std::size_t begin = (c - first_chunk_[k]) * kChunk;
-                          const std::size_t n = std::min(kChunk, points.points.size() - begin);
-                          const std::size_t first = first_point_[k];
-                          if (n == 0) continue;  // never; tells the compiler the arrays are set before projectMany
-                          transformToArrays(points.points[begin].data(), n, view_from_keyframe_[k].matrix().data(),
-                                            chunk.x, chunk.y, chunk.z);
-                          model.projectMany(chunk.x, chunk.y, chunk.z, n, chunk.pixels, chunk.hits);
-                          for (std::size_t i = 0; i < n; ++i) {
-                            const std::size_t number = first + begin + i;
-                            if (!chunk.hits[i]) {
-                              pixel_of_point_[number] = kNoPoint;
-                              continue;
-                            }
-                            const uint32_t pixel = uint32_t(pixel_tables_.index(chunk.pixels[i]));
-                            const bool has_normal = std::isfinite(points.normals[begin + i].x());
-                            pixel_of_point_[number] = has_normal ? pixel : kNoPoint;
-                            range_of_point_[number] = chunk.pixels[i].range;
-                            keepSmallest(nearest[pixel], rangeBits(chunk.pixels[i].range));
-                          }
-                        }
-                      });
-    // Pass 2: of the points on the nearest surface, the newest keyframe's.
-    // The nearest point itself would be biased towards the sensor by the
-    // noise: the least of several noisy ranges of one surface.
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, first_point_.back(), 8192),
-                      [&](const tbb::blocked_range<std::size_t>& block) {
-                        for (std::size_t number = block.begin(); number < block.end(); ++number) {
-                          const uint32_t pixel = pixel_of_point_[number];
-                          if (pixel == kNoPoint) continue;
-                          const float range = range_of_point_[number];
-                          float front;
-                          const uint32_t bits = __atomic_load_n(&nearest[pixel], __ATOMIC_RELAXED);
-                          std::memcpy(&front, &bits, sizeof front);
-                          if (range <= front + std::max(kSurfaceThickness_m, kSurfaceThicknessShare * front))
-                            keepSmallest(winner[pixel], uint32_t(number));
-                        }
-                      });
+    // All keyframes' chunks in one loop (the coarse levels have few points each).
+    each_lane([&](std::size_t n, std::vector<uint32_t>& lane_nearest) {
+      lane_nearest.assign(size, kNoRange);
+      uint32_t* buffer = lane_nearest.data();
+      ChunkBuffers chunk;
+      std::size_t k = 0;
+      for (std::size_t c = lane_first(n); c < lane_first(n + 1); ++c) {
+        while (c >= first_chunk_[k + 1]) ++k;
+        const Level& points = *level_points_[k];
+        const std::size_t begin = (c - first_chunk_[k]) * kChunk;
+        const std::size_t count = std::min(kChunk, points.points.size() - begin);
+        const std::size_t first = first_point_[k];
+        if (count == 0) continue;  // never; tells the compiler the arrays are set before projectMany
+        transformToArrays(points.points[begin].data(), count, view_from_keyframe_[k].matrix().data(), chunk.x,
+                          chunk.y, chunk.z);
+        model.projectMany(chunk.x, chunk.y, chunk.z, count, chunk.pixels, chunk.hits);
+        for (std::size_t i = 0; i < count; ++i) {
+          const std::size_t number = first + begin + i;
+          if (!chunk.hits[i]) {
+            pixel_of_point_[number] = kNoPoint;
+            continue;
+          }
+          const uint32_t pixel = uint32_t(pixel_tables_.index(chunk.pixels[i]));
+          const bool has_normal = std::isfinite(points.normals[begin + i].x());
+          pixel_of_point_[number] = has_normal ? pixel : kNoPoint;
+          range_of_point_[number] = chunk.pixels[i].range;
+          buffer[pixel] = std::min(buffer[pixel], rangeBits(chunk.pixels[i].range));
+        }
+      }
+    });
+    merge_lanes(nearest);
+    // Pass 2: of the points on the nearest surface, the newest keyframe's
+    // (the least number). The nearest point itself would be biased towards
+    // the sensor by the noise: the least of several noisy ranges of one surface.
+    each_lane([&](std::size_t n, std::vector<uint32_t>& lane_winner) {
+      lane_winner.assign(size, kNoPoint);
+      uint32_t* buffer = lane_winner.data();
+      for (std::size_t number = first_number(lane_first(n)), end = first_number(lane_first(n + 1)); number < end;
+           ++number) {
+        const uint32_t pixel = pixel_of_point_[number];
+        if (pixel == kNoPoint) continue;
+        const float range = range_of_point_[number];
+        float front;
+        std::memcpy(&front, &nearest[pixel], sizeof front);
+        if (range <= front + std::max(kSurfaceThickness_m, kSurfaceThicknessShare * front))
+          buffer[pixel] = std::min(buffer[pixel], uint32_t(number));
+      }
+    });
+    merge_lanes(winner);
 
     // Each pixel's winner, moved into the view.
     level.points.resize(size);

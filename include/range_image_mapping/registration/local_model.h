@@ -157,8 +157,9 @@ class LocalModel {
   std::vector<VoxelKey> newest_voxels_;
   std::vector<Eigen::Vector3f> slot_normals_;
   // Per level pixel: the nearest range's bits, then the winning point's
-  // number (atomic compare-and-swap minimums); per point its pixel and range.
+  // number (minimums over the render's lanes); per point its pixel and range.
   mutable std::vector<std::vector<uint32_t>> nearest_, winner_;
+  mutable std::vector<std::vector<uint32_t>> lane_buffers_;  // per render lane: its z-buffer, then its winners
   mutable std::vector<uint32_t> pixel_of_point_;
   mutable std::vector<float> range_of_point_;
   mutable std::vector<std::size_t> first_point_;  // per keyframe, newest first, of the level rendered
