@@ -356,6 +356,9 @@ TEST(DegenerateRegistration, BadInputThrowsClearErrors) {
   options = {};
   options.sparse_rows_chord_offset_m = -1.0;
   EXPECT_THROW(ProjectiveIcp{options}, std::invalid_argument);
+  options = {};
+  options.min_coarse_pairs = -1;
+  EXPECT_THROW(ProjectiveIcp{options}, std::invalid_argument);
 
   const RangeImage image(ousterLikeModel("OS-0-128"));
   ProjectiveIcp icp;
@@ -528,6 +531,49 @@ TEST(LevelSchedule, RunsOnlyTheLevelsAndStepsAsked) {
 
   const RegistrationResult full = icp.alignSource(Eigen::Isometry3d::Identity());
   EXPECT_LT(poseError(full.target_from_source, moved).translation_m, 0.002);
+}
+
+// A coarse level with fewer pairs than min_coarse_pairs is passed over: the
+// pose it started from goes on to the next level as if it had not run (on a
+// VLP-16 the stride-4 level has four rows and 7-21 pairs, and its steps ran
+// away by metres). Here the room gives every level thousands of pairs; a
+// threshold above that passes both coarse levels over, after one look each.
+TEST(LevelSchedule, CoarseLevelsWithTooFewPairsArePassedOver) {
+  const LidarModelConstPtr model = ousterLikeModel("OS-0-128");
+  const TriangleMesh room = simulation::makeBox({-5.0f, -4.0f, -1.5f}, {6.0f, 5.0f, 2.5f}, true);
+  const simulation::RayCaster caster(room);
+  simulation::SensorEffects effects;
+  effects.motion_distortion = false;
+  const simulation::LidarSimulator simulator(model, caster, effects, 1);
+  Eigen::Isometry3d moved = Eigen::Isometry3d::Identity();
+  moved.translation() = Eigen::Vector3d(0.3, -0.2, 0.05);
+  moved.linear() = Eigen::AngleAxisd(0.02, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  const RangeImage target =
+      simulator.simulate(simulation::InterpolatedTrajectory({0.0, 1.0}, {Eigen::Isometry3d::Identity(), Eigen::Isometry3d::Identity()}), 0.0, 0).image;
+  const RangeImage source = simulator.simulate(simulation::InterpolatedTrajectory({0.0, 1.0}, {moved, moved}), 0.0, 1).image;
+  const auto registered = [&](RegistrationOptions options) {
+    ProjectiveIcp icp(options);
+    icp.setTarget(target);
+    return icp.align(source, Eigen::Isometry3d::Identity());
+  };
+  RegistrationOptions finest_only;
+  finest_only.strides = {1};
+  finest_only.iterations = {RegistrationOptions{}.iterations.back()};
+  const RegistrationResult alone = registered(finest_only);
+  RegistrationOptions starved;
+  starved.min_coarse_pairs = 1000000;
+  const RegistrationResult passed_over = registered(starved);
+  EXPECT_TRUE(passed_over.target_from_source.matrix() == alone.target_from_source.matrix())
+      << passed_over.target_from_source.matrix() << "\nagainst the finest level alone\n"
+      << alone.target_from_source.matrix();
+  EXPECT_EQ(passed_over.iterations, alone.iterations + 2);
+  EXPECT_EQ(passed_over.inliers, alone.inliers);
+  // With the default threshold the coarse levels run (thousands of pairs) and
+  // the pyramid's answer is not the finest level's alone.
+  const RegistrationResult pyramid = registered(RegistrationOptions{});
+  EXPECT_GT(pyramid.iterations, alone.iterations + 2);
+  EXPECT_FALSE(pyramid.target_from_source.matrix() == alone.target_from_source.matrix());
+  EXPECT_LT(poseError(pyramid.target_from_source, moved).translation_m, 0.002);
 }
 
 TEST(LevelSchedule, BadRequestsThrowClearErrors) {

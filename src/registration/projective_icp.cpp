@@ -390,6 +390,7 @@ void validateOptions(const RegistrationOptions& options) {
     if (options.iterations[k] < 0) fail("iterations[" + std::to_string(k) + "] must be >= 0");
   }
   if (options.source_stride < 1) fail("source_stride must be >= 1");
+  if (options.min_coarse_pairs < 0) fail("min_coarse_pairs must be >= 0 (0: off)");
   if (!(options.max_correspondence_distance_m >= 0.0)) {
     fail("max_correspondence_distance_m must be >= 0 (0: twice the kernel scale)");
   }
@@ -602,6 +603,7 @@ RegistrationResult ProjectiveIcp::alignSource(const Eigen::Isometry3d& initial_t
                                      target_index_tables_[level].column.data()};
     std::array<const float*, kCoordinates> source_arrays;
     for (int k = 0; k < kCoordinates; ++k) source_arrays[k] = source.coordinates[k].data();
+    const Eigen::Isometry3d level_start = result.target_from_source;
     for (int iteration = 0; iteration < iterations; ++iteration) {
       const Eigen::Matrix3f rotation = result.target_from_source.linear().cast<float>();
       const Eigen::Vector3f translation = result.target_from_source.translation().cast<float>();
@@ -624,6 +626,10 @@ RegistrationResult ProjectiveIcp::alignSource(const Eigen::Isometry3d& initial_t
                           *target_model_, target_arrays, options_, area_weight_range_m_, gate_m);
       }
       ++result.iterations;
+      if (!finest && last.inliers < std::size_t(options_.min_coarse_pairs)) {
+        result.target_from_source = level_start;  // too few pairs to trust this level at all
+        break;
+      }
       if (last.inliers < 6) break;  // nothing to solve for; the pose stays
       const Vector6d delta = solveConstrained(last.hessian(), last.gradient);
       result.target_from_source = applyUpdate(delta, result.target_from_source);

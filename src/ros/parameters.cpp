@@ -239,6 +239,7 @@ registration::RegistrationOptions readRegistrationOptions(const ParameterReader&
   options.max_correspondence_distance_m = reader.getDouble(
       "max_correspondence_distance", defaults.max_correspondence_distance_m, 0.0, 100.0);
   options.gate_grows_with_stride = reader.getBool("gate_grows_with_stride", defaults.gate_grows_with_stride);
+  options.min_coarse_pairs = reader.getInt("min_coarse_pairs", defaults.min_coarse_pairs, 0, 1000000);
   options.min_normal_cosine = reader.getDouble("min_normal_cosine", defaults.min_normal_cosine, -1.0, 1.0);
   options.area_weight_max_range_m =
       reader.getDouble("area_weight_max_range", defaults.area_weight_max_range_m, 0.0, 1e4);

@@ -44,6 +44,7 @@ TEST(OdometryParameters, DefaultsWhenNothingIsSet) {
   EXPECT_EQ(parameters.odometry.max_acceleration_mps2, core.max_acceleration_mps2);
   EXPECT_EQ(parameters.odometry.velocity_decay_time_s, core.velocity_decay_time_s);
   EXPECT_EQ(parameters.odometry.registration.gate_grows_with_stride, core.registration.gate_grows_with_stride);
+  EXPECT_EQ(parameters.odometry.registration.min_coarse_pairs, core.registration.min_coarse_pairs);
 }
 
 TEST(OdometryParameters, ValuesReachTheCoreOptions) {
@@ -64,6 +65,7 @@ TEST(OdometryParameters, ValuesReachTheCoreOptions) {
   node.setParam("max_keyframe_distance", 3.0);
   node.setParam("min_inliers", 50);
   node.setParam("gate_grows_with_stride", false);
+  node.setParam("min_coarse_pairs", 40);
   node.setParam("deskew_passes", 3);
   node.setParam("max_speed", 5.0);
   node.setParam("max_angular_rate_deg", 90.0);
@@ -75,6 +77,7 @@ TEST(OdometryParameters, ValuesReachTheCoreOptions) {
   EXPECT_EQ(parameters.odometry.max_acceleration_mps2, 0.0);
   EXPECT_EQ(parameters.odometry.velocity_decay_time_s, 2.5);
   EXPECT_FALSE(parameters.odometry.registration.gate_grows_with_stride);
+  EXPECT_EQ(parameters.odometry.registration.min_coarse_pairs, 40);
   EXPECT_EQ(parameters.odometry.deskew_passes, 3);
   EXPECT_EQ(parameters.odom_frame, "wheel_odom");
   EXPECT_EQ(parameters.base_frame, "robot");

@@ -38,6 +38,11 @@ struct RegistrationOptions {
   // levels capture motions beyond the gate (from an identity guess, scans
   // metres apart), the fine ones reject outliers.
   bool gate_grows_with_stride = true;
+  // A level before the last with fewer pairs than this is passed over (the
+  // pose it started from kept for the next level): a sparse sensor's coarse
+  // levels (a VLP-16 at stride 4: four rows, 7-21 pairs) cannot hold six
+  // degrees of freedom, and their steps ran away by metres. 0: off.
+  int min_coarse_pairs = 100;
   double min_normal_cosine = 0.8;           // source and target normals must agree
   // Source pixels without a normal of their own are paired too (the pair's
   // plane is the target's; the normals' agreement is checked where the
