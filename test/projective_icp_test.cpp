@@ -478,18 +478,28 @@ TEST(ColumnMotion, DeskewInsideTheRegistrationRecoversAMovingScan) {
 // One Gauss-Newton step at the finest level, as the odometry's deskew loop
 // runs them; an empty schedule leaves the pose; a precomputed
 // full-resolution target map gives the same pyramid as the image.
-TEST(LevelSchedule, RunsOnlyTheLevelsAndStepsAsked) {
+// An OS-0-128 in a closed room, at the origin (target) and at `moved`
+// (source), without motion distortion.
+struct RoomScans {
+  RangeImage target, source;
+};
+RoomScans roomScans(const Eigen::Isometry3d& moved) {
   const LidarModelConstPtr model = ousterLikeModel("OS-0-128");
   const TriangleMesh room = simulation::makeBox({-5.0f, -4.0f, -1.5f}, {6.0f, 5.0f, 2.5f}, true);
   const simulation::RayCaster caster(room);
   simulation::SensorEffects effects;
   effects.motion_distortion = false;
   const simulation::LidarSimulator simulator(model, caster, effects, 1);
+  const auto still = [](const Eigen::Isometry3d& pose) { return simulation::InterpolatedTrajectory({0.0, 1.0}, {pose, pose}); };
+  return {simulator.simulate(still(Eigen::Isometry3d::Identity()), 0.0, 0).image,
+          simulator.simulate(still(moved), 0.0, 1).image};
+}
+
+TEST(LevelSchedule, RunsOnlyTheLevelsAndStepsAsked) {
   Eigen::Isometry3d moved = Eigen::Isometry3d::Identity();
   moved.translation() = Eigen::Vector3d(0.2, -0.1, 0.05);
-  const RangeImage target =
-      simulator.simulate(simulation::InterpolatedTrajectory({0.0, 1.0}, {Eigen::Isometry3d::Identity(), Eigen::Isometry3d::Identity()}), 0.0, 0).image;
-  const RangeImage source = simulator.simulate(simulation::InterpolatedTrajectory({0.0, 1.0}, {moved, moved}), 0.0, 1).image;
+  const RoomScans scans = roomScans(moved);
+  const RangeImage &target = scans.target, &source = scans.source;
 
   RegistrationOptions options;
   ProjectiveIcp icp(options), from_map(options);
@@ -539,18 +549,11 @@ TEST(LevelSchedule, RunsOnlyTheLevelsAndStepsAsked) {
 // away by metres). Here the room gives every level thousands of pairs; a
 // threshold above that passes both coarse levels over, after one look each.
 TEST(LevelSchedule, CoarseLevelsWithTooFewPairsArePassedOver) {
-  const LidarModelConstPtr model = ousterLikeModel("OS-0-128");
-  const TriangleMesh room = simulation::makeBox({-5.0f, -4.0f, -1.5f}, {6.0f, 5.0f, 2.5f}, true);
-  const simulation::RayCaster caster(room);
-  simulation::SensorEffects effects;
-  effects.motion_distortion = false;
-  const simulation::LidarSimulator simulator(model, caster, effects, 1);
   Eigen::Isometry3d moved = Eigen::Isometry3d::Identity();
   moved.translation() = Eigen::Vector3d(0.3, -0.2, 0.05);
   moved.linear() = Eigen::AngleAxisd(0.02, Eigen::Vector3d::UnitZ()).toRotationMatrix();
-  const RangeImage target =
-      simulator.simulate(simulation::InterpolatedTrajectory({0.0, 1.0}, {Eigen::Isometry3d::Identity(), Eigen::Isometry3d::Identity()}), 0.0, 0).image;
-  const RangeImage source = simulator.simulate(simulation::InterpolatedTrajectory({0.0, 1.0}, {moved, moved}), 0.0, 1).image;
+  const RoomScans scans = roomScans(moved);
+  const RangeImage &target = scans.target, &source = scans.source;
   const auto registered = [&](RegistrationOptions options) {
     ProjectiveIcp icp(options);
     icp.setTarget(target);
