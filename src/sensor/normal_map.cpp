@@ -127,6 +127,64 @@ void interiorCrossProducts(const float* centre_ranges, const float* up_ranges, c
   }
 }
 
+// The common case of crossProductNormalsOfRow's in-line rows (a sensor with
+// sparse rows, full resolution), as interiorCrossProducts: a pixel whose row
+// neighbours have a return within the allowed jump and whose rows above and
+// below have a return (whatever its range) gets the central differences'
+// normal if the pixel lies within max_chord_offset of both chords (the
+// segment between its row neighbours, and between the rows above and
+// below), else none; the general path's arithmetic, to the bit.
+RANGE_IMAGE_MAPPING_AVX2_CLONES
+void inLineCrossProducts(const float* centre_ranges, const float* up_ranges, const float* down_ranges,
+                         int range_step, const float* centre_points, const float* up_points, const float* down_points,
+                         int up_shift, int down_shift, int first, int last, float jump_per_pixel,
+                         float max_chord_offset, float* __restrict normals, uint8_t* __restrict done) {
+  for (int column = first; column < last; ++column) {
+    const float centre_range = centre_ranges[std::ptrdiff_t(column) * range_step];
+    const float right_range = centre_ranges[std::ptrdiff_t(column + 1) * range_step];
+    const float left_range = centre_ranges[std::ptrdiff_t(column - 1) * range_step];
+    const float up_range = up_ranges[std::ptrdiff_t(column + up_shift) * range_step];
+    const float down_range = down_ranges[std::ptrdiff_t(column + down_shift) * range_step];
+    const float max_jump = jump_per_pixel * centre_range;
+    // isValidRange, and LevelNeighbourhood::classify along the row, as masks.
+    const auto valid = [](float range) {
+      return int(range > 0.0f) & int(std::abs(range) <= std::numeric_limits<float>::max());
+    };
+    const auto usable = [&](float range) { return valid(range) & int(std::abs(range - centre_range) <= max_jump); };
+    const int all = valid(centre_range) & usable(right_range) & usable(left_range) & valid(up_range) &
+                    valid(down_range);
+    const float* right = centre_points + 3 * (column + 1);
+    const float* left = centre_points + 3 * (column - 1);
+    const float* up = up_points + 3 * (column + up_shift);
+    const float* down = down_points + 3 * (column + down_shift);
+    const float* centre = centre_points + 3 * column;
+    const float rx = right[0] - left[0], ry = right[1] - left[1], rz = right[2] - left[2];  // along the row
+    const float cx = down[0] - up[0], cy = down[1] - up[1], cz = down[2] - up[2];           // along the column
+    const float row_norm = std::sqrt(rx * rx + (ry * ry + rz * rz));
+    const float column_norm = std::sqrt(cx * cx + (cy * cy + cz * cz));
+    // onChord: |(centre - before) x chord| <= max_chord_offset |chord|.
+    const auto offset = [&](const float* before, float dx, float dy, float dz) {
+      const float ax = centre[0] - before[0], ay = centre[1] - before[1], az = centre[2] - before[2];
+      const float ox = ay * dz - az * dy, oy = az * dx - ax * dz, oz = ax * dy - ay * dx;
+      return std::sqrt(ox * ox + (oy * oy + oz * oz));
+    };
+    const int on_chords = int(offset(up, cx, cy, cz) <= max_chord_offset * column_norm) &
+                          int(offset(left, rx, ry, rz) <= max_chord_offset * row_norm);
+    const float nx = ry * cz - rz * cy, ny = rz * cx - rx * cz, nz = rx * cy - ry * cx;
+    const float norm = std::sqrt(nx * nx + (ny * ny + nz * nz));
+    const int reliable = int(norm > 1e-3f * row_norm * column_norm) & on_chords;
+    const float ux = nx / norm, uy = ny / norm, uz = nz / norm;
+    const float sign = ux * centre[0] + (uy * centre[1] + uz * centre[2]) > 0.0f ? -1.0f : 1.0f;
+    const float fx = sign * ux, fy = sign * uy, fz = sign * uz;
+    constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+    float* out = normals + 3 * column;
+    out[0] = reliable ? fx : kNaN;
+    out[1] = reliable ? fy : kNaN;
+    out[2] = reliable ? fz : kNaN;
+    done[column] = uint8_t(all);
+  }
+}
+
 // Cross-product normals of one level row: the tangent along each image axis
 // is the central difference when both neighbours are usable, else the
 // one-sided one; none when neither is usable or a neighbour is across a depth
@@ -158,10 +216,14 @@ void crossProductNormalsOfRow(const LevelNeighbourhood& level, int row, Eigen::V
   // Most pixels first, in the common case's loop; the rest below.
   std::fill(done, done + columns, uint8_t(0));
   const bool in_line = level.max_chord_offset_m > 0.0f && map.stride == 1;
-  if (!in_line && above.ranges && below.ranges) {
+  if (above.ranges && below.ranges) {
     const int first = std::max({1, -above.shift, -below.shift});
     const int last = std::min({columns - 1, columns - above.shift, columns - below.shift});
-    if (first < last)
+    if (first < last && in_line)
+      inLineCrossProducts(centre_row.ranges, above.ranges, below.ranges, range_step, centre_row.points->data(),
+                          above.points->data(), below.points->data(), above.shift, below.shift, first, last,
+                          level.jump_per_pixel, level.max_chord_offset_m, normals->data(), done);
+    else if (first < last)
       interiorCrossProducts(centre_row.ranges, above.ranges, below.ranges, range_step, centre_row.points->data(),
                             above.points->data(), below.points->data(), above.shift, below.shift, first, last,
                             level.jump_per_pixel, normals->data(), done);
