@@ -74,6 +74,69 @@ Eigen::Vector3f facingSensor(const Eigen::Vector3f& normal, const Eigen::Vector3
   return normal.dot(point) > 0.0f ? Eigen::Vector3f(-normal) : normal;
 }
 
+// The five ranges a pixel's cross product reads (its own, its row
+// neighbours', the rows' above and below at its azimuth), and their
+// validity and range jump as masks (isValidRange and
+// LevelNeighbourhood::classify; 0 for NaN).
+struct CrossRanges {
+  float centre, right, left, up, down, max_jump;
+  int valid(float range) const { return int(range > 0.0f) & int(std::abs(range) <= std::numeric_limits<float>::max()); }
+  int usable(float range) const { return valid(range) & int(std::abs(range - centre) <= max_jump); }
+};
+[[gnu::always_inline]] inline CrossRanges crossRanges(const float* centre_ranges, const float* up_ranges,
+                                                      const float* down_ranges, int range_step, int up_shift,
+                                                      int down_shift, int column, float jump_per_pixel) {
+  CrossRanges r;
+  r.centre = centre_ranges[std::ptrdiff_t(column) * range_step];
+  r.right = centre_ranges[std::ptrdiff_t(column + 1) * range_step];
+  r.left = centre_ranges[std::ptrdiff_t(column - 1) * range_step];
+  r.up = up_ranges[std::ptrdiff_t(column + up_shift) * range_step];
+  r.down = down_ranges[std::ptrdiff_t(column + down_shift) * range_step];
+  r.max_jump = jump_per_pixel * r.centre;
+  return r;
+}
+
+// A pixel's central differences (points as xyz triples): r along the row,
+// from its left to its right neighbour, c along the column, from the row
+// above to the row below, their lengths, and the points they start from.
+struct CrossTangents {
+  const float *centre, *left, *up;
+  float rx, ry, rz, cx, cy, cz, row_norm, column_norm;
+};
+[[gnu::always_inline]] inline CrossTangents crossTangents(const float* centre_points, const float* up_points,
+                                                          const float* down_points, int up_shift, int down_shift,
+                                                          int column) {
+  CrossTangents t;
+  t.centre = centre_points + 3 * column;
+  t.left = centre_points + 3 * (column - 1);
+  t.up = up_points + 3 * (column + up_shift);
+  const float* right = centre_points + 3 * (column + 1);
+  const float* down = down_points + 3 * (column + down_shift);
+  t.rx = right[0] - t.left[0], t.ry = right[1] - t.left[1], t.rz = right[2] - t.left[2];
+  t.cx = down[0] - t.up[0], t.cy = down[1] - t.up[1], t.cz = down[2] - t.up[2];
+  t.row_norm = std::sqrt(t.rx * t.rx + (t.ry * t.ry + t.rz * t.rz));
+  t.column_norm = std::sqrt(t.cx * t.cx + (t.cy * t.cy + t.cz * t.cz));
+  return t;
+}
+
+// The normal of a pixel's tangents (r x c), unit and facing the sensor,
+// into out where `reliable` and the tangents are not nearly parallel, else
+// NaN: Eigen's cross, and its squaredNorm and dot as it sums three terms,
+// x + (y + z). Every value is computed before the selects, so that they
+// stay selects.
+[[gnu::always_inline]] inline void writeCrossNormal(const CrossTangents& t, int reliable, float* out) {
+  const float nx = t.ry * t.cz - t.rz * t.cy, ny = t.rz * t.cx - t.rx * t.cz, nz = t.rx * t.cy - t.ry * t.cx;
+  const float norm = std::sqrt(nx * nx + (ny * ny + nz * nz));
+  const int kept = int(norm > 1e-3f * t.row_norm * t.column_norm) & reliable;
+  const float ux = nx / norm, uy = ny / norm, uz = nz / norm;
+  const float sign = ux * t.centre[0] + (uy * t.centre[1] + uz * t.centre[2]) > 0.0f ? -1.0f : 1.0f;
+  const float fx = sign * ux, fy = sign * uy, fz = sign * uz;
+  constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+  out[0] = kept ? fx : kNaN;
+  out[1] = kept ? fy : kNaN;
+  out[2] = kept ? fz : kNaN;
+}
+
 // The common case of crossProductNormalsOfRow over plain arrays, branch
 // free so that it vectorises: a pixel whose four neighbours (its row's next
 // columns, and the rows above and below at the same azimuth) all have a
@@ -88,41 +151,11 @@ void interiorCrossProducts(const float* centre_ranges, const float* up_ranges, c
                            const float* down_points, int up_shift, int down_shift, int first, int last,
                            float jump_per_pixel, float* __restrict normals, uint8_t* __restrict done) {
   for (int column = first; column < last; ++column) {
-    const float centre_range = centre_ranges[std::ptrdiff_t(column) * range_step];
-    const float right_range = centre_ranges[std::ptrdiff_t(column + 1) * range_step];
-    const float left_range = centre_ranges[std::ptrdiff_t(column - 1) * range_step];
-    const float up_range = up_ranges[std::ptrdiff_t(column + up_shift) * range_step];
-    const float down_range = down_ranges[std::ptrdiff_t(column + down_shift) * range_step];
-    const float max_jump = jump_per_pixel * centre_range;
-    // isValidRange and LevelNeighbourhood::classify, as masks (false for NaN).
-    const auto usable = [&](float range) {
-      return int(range > 0.0f) & int(std::abs(range) <= std::numeric_limits<float>::max()) &
-             int(std::abs(range - centre_range) <= max_jump);
-    };
-    const int all = int(centre_range > 0.0f) & int(std::abs(centre_range) <= std::numeric_limits<float>::max()) &
-                    usable(right_range) & usable(left_range) & usable(up_range) & usable(down_range);
-    const float* right = centre_points + 3 * (column + 1);
-    const float* left = centre_points + 3 * (column - 1);
-    const float* up = up_points + 3 * (column + up_shift);
-    const float* down = down_points + 3 * (column + down_shift);
-    const float rx = right[0] - left[0], ry = right[1] - left[1], rz = right[2] - left[2];  // along the row
-    const float cx = down[0] - up[0], cy = down[1] - up[1], cz = down[2] - up[2];           // along the column
-    // Eigen's cross, and its squaredNorm and dot as it sums three terms: x + (y + z).
-    const float nx = ry * cz - rz * cy, ny = rz * cx - rx * cz, nz = rx * cy - ry * cx;
-    const float norm = std::sqrt(nx * nx + (ny * ny + nz * nz));
-    const float row_norm = std::sqrt(rx * rx + (ry * ry + rz * rz));
-    const float column_norm = std::sqrt(cx * cx + (cy * cy + cz * cz));
-    const int reliable = int(norm > 1e-3f * row_norm * column_norm);
-    const float* centre = centre_points + 3 * column;
-    const float ux = nx / norm, uy = ny / norm, uz = nz / norm;
-    const float sign = ux * centre[0] + (uy * centre[1] + uz * centre[2]) > 0.0f ? -1.0f : 1.0f;
-    // Every value computed before the selects, so that they stay selects.
-    const float fx = sign * ux, fy = sign * uy, fz = sign * uz;
-    constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
-    float* out = normals + 3 * column;
-    out[0] = reliable ? fx : kNaN;
-    out[1] = reliable ? fy : kNaN;
-    out[2] = reliable ? fz : kNaN;
+    const CrossRanges r =
+        crossRanges(centre_ranges, up_ranges, down_ranges, range_step, up_shift, down_shift, column, jump_per_pixel);
+    const int all = r.valid(r.centre) & r.usable(r.right) & r.usable(r.left) & r.usable(r.up) & r.usable(r.down);
+    const CrossTangents t = crossTangents(centre_points, up_points, down_points, up_shift, down_shift, column);
+    writeCrossNormal(t, 1, normals + 3 * column);
     done[column] = uint8_t(all);
   }
 }
@@ -140,47 +173,19 @@ void inLineCrossProducts(const float* centre_ranges, const float* up_ranges, con
                          int up_shift, int down_shift, int first, int last, float jump_per_pixel,
                          float max_chord_offset, float* __restrict normals, uint8_t* __restrict done) {
   for (int column = first; column < last; ++column) {
-    const float centre_range = centre_ranges[std::ptrdiff_t(column) * range_step];
-    const float right_range = centre_ranges[std::ptrdiff_t(column + 1) * range_step];
-    const float left_range = centre_ranges[std::ptrdiff_t(column - 1) * range_step];
-    const float up_range = up_ranges[std::ptrdiff_t(column + up_shift) * range_step];
-    const float down_range = down_ranges[std::ptrdiff_t(column + down_shift) * range_step];
-    const float max_jump = jump_per_pixel * centre_range;
-    // isValidRange, and LevelNeighbourhood::classify along the row, as masks.
-    const auto valid = [](float range) {
-      return int(range > 0.0f) & int(std::abs(range) <= std::numeric_limits<float>::max());
-    };
-    const auto usable = [&](float range) { return valid(range) & int(std::abs(range - centre_range) <= max_jump); };
-    const int all = valid(centre_range) & usable(right_range) & usable(left_range) & valid(up_range) &
-                    valid(down_range);
-    const float* right = centre_points + 3 * (column + 1);
-    const float* left = centre_points + 3 * (column - 1);
-    const float* up = up_points + 3 * (column + up_shift);
-    const float* down = down_points + 3 * (column + down_shift);
-    const float* centre = centre_points + 3 * column;
-    const float rx = right[0] - left[0], ry = right[1] - left[1], rz = right[2] - left[2];  // along the row
-    const float cx = down[0] - up[0], cy = down[1] - up[1], cz = down[2] - up[2];           // along the column
-    const float row_norm = std::sqrt(rx * rx + (ry * ry + rz * rz));
-    const float column_norm = std::sqrt(cx * cx + (cy * cy + cz * cz));
+    const CrossRanges r =
+        crossRanges(centre_ranges, up_ranges, down_ranges, range_step, up_shift, down_shift, column, jump_per_pixel);
+    const int all = r.valid(r.centre) & r.usable(r.right) & r.usable(r.left) & r.valid(r.up) & r.valid(r.down);
+    const CrossTangents t = crossTangents(centre_points, up_points, down_points, up_shift, down_shift, column);
     // onChord: |(centre - before) x chord| <= max_chord_offset |chord|.
     const auto offset = [&](const float* before, float dx, float dy, float dz) {
-      const float ax = centre[0] - before[0], ay = centre[1] - before[1], az = centre[2] - before[2];
+      const float ax = t.centre[0] - before[0], ay = t.centre[1] - before[1], az = t.centre[2] - before[2];
       const float ox = ay * dz - az * dy, oy = az * dx - ax * dz, oz = ax * dy - ay * dx;
       return std::sqrt(ox * ox + (oy * oy + oz * oz));
     };
-    const int on_chords = int(offset(up, cx, cy, cz) <= max_chord_offset * column_norm) &
-                          int(offset(left, rx, ry, rz) <= max_chord_offset * row_norm);
-    const float nx = ry * cz - rz * cy, ny = rz * cx - rx * cz, nz = rx * cy - ry * cx;
-    const float norm = std::sqrt(nx * nx + (ny * ny + nz * nz));
-    const int reliable = int(norm > 1e-3f * row_norm * column_norm) & on_chords;
-    const float ux = nx / norm, uy = ny / norm, uz = nz / norm;
-    const float sign = ux * centre[0] + (uy * centre[1] + uz * centre[2]) > 0.0f ? -1.0f : 1.0f;
-    const float fx = sign * ux, fy = sign * uy, fz = sign * uz;
-    constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
-    float* out = normals + 3 * column;
-    out[0] = reliable ? fx : kNaN;
-    out[1] = reliable ? fy : kNaN;
-    out[2] = reliable ? fz : kNaN;
+    const int on_chords = int(offset(t.up, t.cx, t.cy, t.cz) <= max_chord_offset * t.column_norm) &
+                          int(offset(t.left, t.rx, t.ry, t.rz) <= max_chord_offset * t.row_norm);
+    writeCrossNormal(t, on_chords, normals + 3 * column);
     done[column] = uint8_t(all);
   }
 }
