@@ -80,7 +80,7 @@ Eigen::Vector3f facingSensor(const Eigen::Vector3f& normal, const Eigen::Vector3
 // LevelNeighbourhood::classify; 0 for NaN).
 struct CrossRanges {
   float centre, right, left, up, down, max_jump;
-  int valid(float range) const { return int(range > 0.0f) & int(std::abs(range) <= std::numeric_limits<float>::max()); }
+  static int valid(float range) { return int(range > 0.0f) & int(std::abs(range) <= std::numeric_limits<float>::max()); }
   int usable(float range) const { return valid(range) & int(std::abs(range - centre) <= max_jump); }
 };
 [[gnu::always_inline]] inline CrossRanges crossRanges(const float* centre_ranges, const float* up_ranges,
@@ -224,14 +224,16 @@ void crossProductNormalsOfRow(const LevelNeighbourhood& level, int row, Eigen::V
   if (above.ranges && below.ranges) {
     const int first = std::max({1, -above.shift, -below.shift});
     const int last = std::min({columns - 1, columns - above.shift, columns - below.shift});
-    if (first < last && in_line)
-      inLineCrossProducts(centre_row.ranges, above.ranges, below.ranges, range_step, centre_row.points->data(),
-                          above.points->data(), below.points->data(), above.shift, below.shift, first, last,
-                          level.jump_per_pixel, level.max_chord_offset_m, normals->data(), done);
-    else if (first < last)
-      interiorCrossProducts(centre_row.ranges, above.ranges, below.ranges, range_step, centre_row.points->data(),
+    if (first < last) {
+      if (in_line)
+        inLineCrossProducts(centre_row.ranges, above.ranges, below.ranges, range_step, centre_row.points->data(),
                             above.points->data(), below.points->data(), above.shift, below.shift, first, last,
-                            level.jump_per_pixel, normals->data(), done);
+                            level.jump_per_pixel, level.max_chord_offset_m, normals->data(), done);
+      else
+        interiorCrossProducts(centre_row.ranges, above.ranges, below.ranges, range_step, centre_row.points->data(),
+                              above.points->data(), below.points->data(), above.shift, below.shift, first, last,
+                              level.jump_per_pixel, normals->data(), done);
+    }
   }
   for (int column = 0; column < columns; ++column) {
     if (done[std::size_t(column)]) continue;
