@@ -146,6 +146,33 @@ TEST(LidarOdometry, CovarianceIsSymmetricPositiveDefiniteAndSmallForAGoodScan) {
   EXPECT_GT(update.condition_number, 1.0);
 }
 
+// A coarse level passed over for want of pairs is counted, and a scan that
+// had every one passed over says so: a setting that starves the pyramid is
+// not silent. With the defaults the room's coarse levels all run.
+TEST(LidarOdometry, CoarseLevelsPassedOverAreCountedAndSaid) {
+  for (const bool starved : {false, true}) {
+    OdometryOptions options;
+    if (starved) options.registration.min_coarse_pairs = 1000000;
+    LidarOdometry odometry(options);
+    for (int k = 0; k < 4; ++k) {
+      const OdometryUpdate update = odometry.process(roomScan(steadyMotion, k * kScanPeriodS, kScanPeriodS));
+      expectFinite(update);
+      if (k == 0) continue;  // the first scan is not registered
+      const bool said = update.warning.find("min_coarse_pairs") != std::string::npos;
+      EXPECT_FALSE(update.degenerate) << update.warning;
+      if (starved) {
+        EXPECT_EQ(update.levels_passed_over, int(options.registration.strides.size()) - 1);
+        EXPECT_TRUE(update.every_coarse_level_passed_over);
+        EXPECT_TRUE(said) << update.warning;
+      } else {
+        EXPECT_EQ(update.levels_passed_over, 0);
+        EXPECT_FALSE(update.every_coarse_level_passed_over);
+        EXPECT_FALSE(said) << update.warning;
+      }
+    }
+  }
+}
+
 TEST(LidarOdometry, AFloorAloneIsDegenerateAndFallsBackToTheMotionPrior) {
   LidarOdometry odometry;
   const Motion still = [](double) { return Eigen::Isometry3d::Identity(); };

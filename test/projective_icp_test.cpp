@@ -570,11 +570,13 @@ TEST(LevelSchedule, CoarseLevelsWithTooFewPairsArePassedOver) {
       << passed_over.target_from_source.matrix() << "\nagainst the finest level alone\n"
       << alone.target_from_source.matrix();
   EXPECT_EQ(passed_over.iterations, alone.iterations + 2);
+  EXPECT_EQ(passed_over.levels_passed_over, 2);  // said, not silent
   EXPECT_EQ(passed_over.inliers, alone.inliers);
   // With the default threshold the coarse levels run (thousands of pairs) and
   // the pyramid's answer is not the finest level's alone.
   const RegistrationResult pyramid = registered(RegistrationOptions{});
   EXPECT_GT(pyramid.iterations, alone.iterations + 2);
+  EXPECT_EQ(pyramid.levels_passed_over, 0);
   EXPECT_FALSE(pyramid.target_from_source.matrix() == alone.target_from_source.matrix());
   EXPECT_LT(poseError(pyramid.target_from_source, moved).translation_m, 0.002);
 }

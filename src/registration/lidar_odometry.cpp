@@ -321,8 +321,10 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
       }
       const Eigen::Isometry3d before = result.target_from_source;
       const int iterations = result.iterations;
+      const int passed_over = result.levels_passed_over;
       result = icp_.alignSource(before, step, columnMotion(deskew_twist));
       result.iterations += iterations;
+      result.levels_passed_over += passed_over;
       if (result.inliers < options_.min_inliers) break;  // degenerate: the check below falls back
       const Vector6d change = twistLogarithm(before.inverse() * result.target_from_source);
       // Settled: a deskew that no longer moves the pose, or the passes spent
@@ -333,6 +335,8 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
   }
   update.inliers = result.inliers;
   update.iterations = result.iterations;
+  update.levels_passed_over = result.levels_passed_over;
+  update.every_coarse_level_passed_over = finest > 0 && std::size_t(result.levels_passed_over) >= finest;
   update.condition_number = result.condition_number;
   update.residual_rms_m = result.residual_rms_m;
 
@@ -427,6 +431,13 @@ OdometryUpdate LidarOdometry::process(const RangeImage& input, uint64_t scan_tim
               "sensor model that does not fit the data)";
       update.warning += std::string(update.warning.empty() ? "" : "; ") + text.str();
     }
+  }
+  if (update.every_coarse_level_passed_over) {
+    // Not a failure by itself (the finest level registered), but the motion
+    // the prior missed had only the full-resolution gate to be captured in.
+    update.warning += std::string(update.warning.empty() ? "" : "; ") +
+                      "every coarse level had fewer than min_coarse_pairs pairs and was passed over: only full "
+                      "resolution registered (check the sensor model, or strides too coarse for its rows)";
   }
   // A suspect pose must not look as certain as a good one to whoever fuses
   // it (the odometry message's covariance).

@@ -628,6 +628,7 @@ RegistrationResult ProjectiveIcp::alignSource(const Eigen::Isometry3d& initial_t
       ++result.iterations;
       if (!finest && last.inliers < std::size_t(options_.min_coarse_pairs)) {
         result.target_from_source = level_start;  // too few pairs to trust this level at all
+        ++result.levels_passed_over;
         break;
       }
       if (last.inliers < 6) break;  // nothing to solve for; the pose stays

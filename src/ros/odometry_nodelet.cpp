@@ -55,6 +55,8 @@ struct OdometryStatistics {
   std::size_t degenerate = 0;
   std::size_t untrusted = 0;       // registrations that broke a physical limit (among degenerate)
   std::size_t suspect = 0;         // registered, but few pixels paired or moving objects fill the scan
+  std::size_t coarse_passed_over = 0;        // registered scans with a coarse level passed over (min_coarse_pairs)
+  std::size_t every_coarse_passed_over = 0;  // ... with every coarse level passed over
   double inlier_share = 0.0;       // sums over registered scans
   double moving_share = 0.0;
   double prior_difference_m = 0.0;
@@ -78,6 +80,8 @@ struct OdometryStatistics {
     d.degenerate = degenerate - earlier.degenerate;
     d.untrusted = untrusted - earlier.untrusted;
     d.suspect = suspect - earlier.suspect;
+    d.coarse_passed_over = coarse_passed_over - earlier.coarse_passed_over;
+    d.every_coarse_passed_over = every_coarse_passed_over - earlier.every_coarse_passed_over;
     d.inlier_share = inlier_share - earlier.inlier_share;
     d.moving_share = moving_share - earlier.moving_share;
     d.prior_difference_m = prior_difference_m - earlier.prior_difference_m;
@@ -281,6 +285,8 @@ void OdometryNodelet::step(const LidarRangeImage::ConstPtr& message, const Eigen
       statistics_.moving_share += update.movingShare();
       statistics_.prior_difference_m += update.prior_difference_m;
       if (update.suspect) ++statistics_.suspect;
+      if (update.levels_passed_over > 0) ++statistics_.coarse_passed_over;
+      if (update.every_coarse_level_passed_over) ++statistics_.every_coarse_passed_over;
     }
     const double step_s = update.reset || update.skipped || last_update_.stamp_ns == 0 ||
                                   update.stamp_ns <= last_update_.stamp_ns
@@ -445,6 +451,8 @@ void OdometryNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
   status.add("degenerate", window.degenerate);
   status.add("untrusted (physical limits)", window.untrusted);
   status.add("suspect (few pairs or many moving pixels)", window.suspect);
+  status.add("coarse levels passed over (scans; min_coarse_pairs)", window.coarse_passed_over);
+  status.add("every coarse level passed over (scans)", window.every_coarse_passed_over);
   status.add("mean inlier share", window.inlier_share / registered);
   status.add("mean moving share", window.moving_share / registered);
   status.add("mean difference from the motion prior (m)", window.prior_difference_m / registered);
@@ -473,8 +481,8 @@ void OdometryNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
                     parameters_.base_frame.c_str(), parameters_.lidar_transform_timeout_s);
   else if (window.frames == 0)
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "no range images");
-  else if (window.degenerate + window.suspect + window.dropped_frames + window.out_of_order + window.rejected +
-               window.skipped >
+  else if (window.degenerate + window.suspect + window.every_coarse_passed_over + window.dropped_frames +
+               window.out_of_order + window.rejected + window.skipped >
            0)
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN,
                    window.untrusted > 0   ? "registrations broke a physical limit (max_speed, max_angular_rate_deg, "
@@ -482,6 +490,9 @@ void OdometryNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
                    : window.degenerate > 0 ? "degenerate registrations"
                    : window.suspect > 0    ? "suspect registrations: moving objects fill much of the view, or few "
                                              "pixels pair with the model (check the sensor settings); see last warning"
+                   : window.every_coarse_passed_over > 0
+                       ? "every coarse level passed over (fewer than min_coarse_pairs pairs): only full resolution "
+                         "registers, with a short capture range; check the sensor model, or use fewer, finer strides"
                                            : "dropped, skipped or out-of-order frames");
   else
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, "tracking");
@@ -494,12 +505,14 @@ void OdometryNodelet::onStatisticsTimer(const ros::SteadyTimerEvent&) {
   const double stepped = std::max<double>(1.0, double(window.frames));
   const double registered = std::max<double>(1.0, double(window.registered));
   NODELET_INFO("odometry: %.1f Hz, %.1f ms per step, %.1f iterations, %.0f inliers (%.0f %% of pixels), %.1f %% "
-               "moving; degenerate %zu (untrusted %zu), suspect %zu, skipped %zu, resets %zu, dropped %zu, out of "
-               "order %zu, rejected %zu; %zu received, %zu held and %zu dropped waiting for tf %s -> lidar",
+               "moving; degenerate %zu (untrusted %zu), suspect %zu, coarse levels passed over %zu (all %zu), "
+               "skipped %zu, resets %zu, dropped %zu, out of order %zu, rejected %zu; %zu received, %zu held and %zu "
+               "dropped waiting for tf %s -> lidar",
                double(window.frames) / period, 1e3 * window.seconds / stepped,
                double(window.iterations) / registered, double(window.inliers) / registered,
                100.0 * window.inlier_share / registered, 100.0 * window.moving_share / registered, window.degenerate,
-               window.untrusted, window.suspect, window.skipped, window.resets, window.dropped_frames, window.out_of_order,
+               window.untrusted, window.suspect, window.coarse_passed_over, window.every_coarse_passed_over,
+               window.skipped, window.resets, window.dropped_frames, window.out_of_order,
                window.rejected, window.received, window.held_for_mount, window.dropped_for_mount,
                parameters_.base_frame.c_str());
 }

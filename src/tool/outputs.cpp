@@ -206,6 +206,8 @@ void OdometryHealth::add(const registration::OdometryUpdate& update) {
   skipped_ += update.skipped;
   ++frames_;
   keyframes_ += update.keyframe;
+  levels_passed_over_ += update.levels_passed_over > 0;
+  every_coarse_level_passed_over_ += update.every_coarse_level_passed_over;
   if (update.skipped || update.reset) return;
   ++registered_;
   keyframe_distance_m_ += update.keyframe_distance_m;
@@ -227,6 +229,8 @@ Json::Value OdometryHealth::json() const {
   json["mean_moving_share"] = moving_share_ / registered;
   json["max_moving_share"] = most_moving_share_;
   json["mean_prior_difference_m"] = prior_difference_m_ / registered;
+  json["scans_with_coarse_levels_passed_over"] = levels_passed_over_;
+  json["scans_with_every_coarse_level_passed_over"] = every_coarse_level_passed_over_;
   json["keyframes"] = keyframes_;
   json["keyframe_distance_in_use_m"] = keyframe_distance_m_ / registered;  // mean over registered scans
   return json;
@@ -239,7 +243,9 @@ std::string OdometryHealth::line() const {
   text << degenerate_ << " degenerate (" << untrusted_ << " untrusted), " << suspect_ << " suspect, " << resets_
        << " resets, " << skipped_ << " skipped; pixels paired " << 100.0 * inlier_share_ / registered
        << " %, moving " << 100.0 * moving_share_ / registered << " % (most " << 100.0 * most_moving_share_
-       << " %); " << keyframes_ << " keyframes " << keyframe_distance_m_ / registered << " m apart";
+       << " %); coarse levels passed over in " << levels_passed_over_ << " scans (every one in "
+       << every_coarse_level_passed_over_ << "); " << keyframes_ << " keyframes " << keyframe_distance_m_ / registered
+       << " m apart";
   return text.str();
 }
 
@@ -260,6 +266,11 @@ std::string OdometryHealth::warning() const {
     return std::to_string(suspect_) + " of " + std::to_string(frames_) +
            " scans were suspect (few pixels paired, or moving objects filling the view): check the warnings in "
            "the frames CSV";
+  if (2 * every_coarse_level_passed_over_ > frames_)
+    return std::to_string(every_coarse_level_passed_over_) + " of " + std::to_string(frames_) +
+           " scans passed over every coarse pyramid level (fewer than min_coarse_pairs pairs): only full resolution "
+           "registered them, with a short capture range; check the sensor model (rim sensor check INPUT) or use "
+           "fewer, finer strides";
   return {};
 }
 
@@ -272,7 +283,7 @@ int reportHealth(const OdometryHealth& health) {
 
 OdometryFramesCsv::OdometryFramesCsv(const std::string& path) : path_(path), file_(path) {
   if (!file_) throw std::runtime_error("cannot write " + path);
-  file_ << "frame,time_s,seconds,inliers,iterations,condition_number,residual_rms_m,degenerate,reset,"
+  file_ << "frame,time_s,seconds,inliers,iterations,levels_passed_over,condition_number,residual_rms_m,degenerate,reset,"
            "skipped,valid_pixels,inlier_share,moving_share,prior_difference_m,prior_difference_deg,keyframe,"
            "keyframe_distance_m,warning\n";
 }
@@ -281,7 +292,8 @@ void OdometryFramesCsv::add(int frame, const registration::OdometryUpdate& updat
   std::string warning = update.warning;
   std::replace(warning.begin(), warning.end(), ',', ';');
   file_ << frame << ',' << std::setprecision(15) << double(update.stamp_ns) * 1e-9 << std::setprecision(6) << ','
-        << update.seconds << ',' << update.inliers << ',' << update.iterations << ',' << update.condition_number
+        << update.seconds << ',' << update.inliers << ',' << update.iterations << ',' << update.levels_passed_over << ','
+        << update.condition_number
         << ',' << update.residual_rms_m << ',' << update.degenerate << ',' << update.reset << ','
         << update.skipped << ',' << update.valid_pixels << ',' << update.inlierShare() << ','
         << update.movingShare() << ',' << update.prior_difference_m << ','

@@ -79,7 +79,8 @@ class OdometryHealth {
   int skipped() const { return skipped_; }
   Json::Value json() const;
   // "N degenerate (U untrusted), S suspect, R resets, K skipped; pixels paired
-  // P %, moving M % (most X %); F keyframes D m apart"
+  // P %, moving M % (most X %); coarse levels passed over in C scans (every
+  // one in A); F keyframes D m apart"
   std::string line() const;
   // A warning naming the problem when the run looks wrong ("" if not).
   std::string warning() const;
@@ -88,6 +89,7 @@ class OdometryHealth {
   int frames_ = 0, registered_ = 0, degenerate_ = 0, untrusted_ = 0, suspect_ = 0, resets_ = 0, skipped_ = 0;
   double inlier_share_ = 0.0, moving_share_ = 0.0, most_moving_share_ = 0.0, prior_difference_m_ = 0.0;
   int keyframes_ = 0;
+  int levels_passed_over_ = 0, every_coarse_level_passed_over_ = 0;  // scans with any, with all
   double keyframe_distance_m_ = 0.0;  // sum over registered scans of the distance in force
 };
 

@@ -114,6 +114,11 @@ struct OdometryUpdate {
   double inlierShare() const { return valid_pixels ? double(inliers) / double(valid_pixels) : 0.0; }
   double movingShare() const { return valid_pixels ? double(moving_pixels) / double(valid_pixels) : 0.0; }
   int iterations = 0;
+  // Coarse pyramid levels passed over for want of pairs
+  // (RegistrationOptions::min_coarse_pairs): the finer levels had to capture
+  // the motion from the prior alone.
+  int levels_passed_over = 0;
+  bool every_coarse_level_passed_over = false;  // ... all of them: said in `warning`
   double condition_number = 0.0;  // of the last hessian
   double residual_rms_m = 0.0;
   bool degenerate = false;   // the motion prior was used (degenerate or untrusted registration)

@@ -95,6 +95,9 @@ struct RegistrationResult {
   Eigen::Matrix<double, 6, 6> hessian = Eigen::Matrix<double, 6, 6>::Zero();
   std::size_t inliers = 0;       // pairs in the last iteration
   int iterations = 0;            // over all levels
+  // Coarse levels left with the pose they started from: fewer pairs than
+  // RegistrationOptions::min_coarse_pairs (a sensor too sparse for the stride).
+  int levels_passed_over = 0;
   double condition_number = 0;   // of the hessian; infinity when it is singular (no pairs)
   double residual_rms_m = 0;
 };
