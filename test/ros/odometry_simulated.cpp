@@ -13,6 +13,7 @@
 #include "rostest_main.h"
 #include "spin_until.h"
 
+#include <diagnostic_msgs/DiagnosticArray.h>
 #include <geometry_msgs/TransformStamped.h>
 #include <gtest/gtest.h>
 #include <nav_msgs/Odometry.h>
@@ -54,6 +55,10 @@ struct Settings {
   // > 0: the mount base_link -> sensor goes on tf only once this many range
   // images were seen, so the Odometry must hold the scans until it comes.
   int mount_after_scans = 0;
+  // Non-empty: the run starves every coarse level (min_coarse_pairs in
+  // extra_config), and diagnostics must say so with a WARN naming this;
+  // empty: no scan may have had every coarse level passed over.
+  std::string expect_coarse_warning;
 };
 
 Settings readSettings() {
@@ -75,6 +80,7 @@ Settings readSettings() {
       private_node.param("max_angular_velocity_error", settings.max_angular_velocity_error_radps);
   settings.min_frames = private_node.param("min_frames", settings.min_frames);
   settings.mount_after_scans = private_node.param("mount_after_scans", settings.mount_after_scans);
+  settings.expect_coarse_warning = private_node.param<std::string>("expect_coarse_warning", "");
   return settings;
 }
 
@@ -138,6 +144,20 @@ TEST(OdometrySimulated, FollowsTheGroundTruthOnTfAndOdometry) {
       });
   ros::Subscriber path_subscriber =
       node.subscribe<nav_msgs::Path>("/path", 4, [&](const nav_msgs::Path::ConstPtr& message) { path = message; });
+  // The Odometry's diagnostics: scans with every coarse level passed over,
+  // and the WARN summaries.
+  int odometry_statuses = 0, starved_scans = 0;
+  std::vector<std::string> warnings;
+  ros::Subscriber diagnostics_subscriber = node.subscribe<diagnostic_msgs::DiagnosticArray>(
+      "/diagnostics", 100, [&](const diagnostic_msgs::DiagnosticArray::ConstPtr& array) {
+        for (const diagnostic_msgs::DiagnosticStatus& status : array->status) {
+          if (status.name != "odometry: odometry") continue;
+          ++odometry_statuses;
+          if (status.level == diagnostic_msgs::DiagnosticStatus::WARN) warnings.push_back(status.message);
+          for (const diagnostic_msgs::KeyValue& value : status.values)
+            if (value.key == "every coarse level passed over (scans)") starved_scans += std::stoi(value.value);
+        }
+      });
 
   // Until the replay is over: enough messages, then none for 3 s.
   std::size_t seen = 0;
@@ -157,6 +177,20 @@ TEST(OdometrySimulated, FollowsTheGroundTruthOnTfAndOdometry) {
     // The scans that waited for the mount are posed too: the first message is
     // the first scan's, not the first after the mount.
     EXPECT_EQ(odometry.front()->header.stamp, first_range_image_stamp);
+  }
+
+  // A starved pyramid is said in diagnostics; a normal run has none.
+  EXPECT_GT(odometry_statuses, 0) << "no odometry diagnostics";
+  std::cout << odometry_statuses << " odometry diagnostics, " << warnings.size() << " WARN (first: "
+            << (warnings.empty() ? std::string("none") : warnings.front()) << "); " << starved_scans
+            << " scans with every coarse level passed over\n";
+  if (settings.expect_coarse_warning.empty()) {
+    EXPECT_EQ(starved_scans, 0);
+  } else {
+    EXPECT_GE(starved_scans, settings.min_frames / 2) << "scans with every coarse level passed over";
+    EXPECT_TRUE(std::any_of(warnings.begin(), warnings.end(), [&](const std::string& warning) {
+      return warning.find(settings.expect_coarse_warning) != std::string::npos;
+    })) << "no WARN naming " << settings.expect_coarse_warning << " among " << warnings.size() << " warnings";
   }
 
   // Every message: frames, finite pose, finite symmetric covariance.
