@@ -9,6 +9,7 @@
 #include <json/json.h>
 
 #include <filesystem>
+#include <fstream>
 #include <sstream>
 
 namespace range_image_mapping {
@@ -44,7 +45,19 @@ TEST_F(RunCommand, IndoorPresetGivesTrajectoryMeshAndReportAgainstGroundTruth) {
   EXPECT_GT(report["ground_truth"]["surface"]["f_score"].asDouble(), 0.93) << run.out;
   EXPECT_NE(run.out.find("ATE"), std::string::npos) << run.out;
   EXPECT_NE(run.out.find("F-score"), std::string::npos) << run.out;
-  if (report["outputs"].isMember("report_png")) EXPECT_TRUE(std::filesystem::exists(path("run/report.png")));
+  if (report["outputs"].isMember("report_png")) {
+    // Four panels (top view, time, error, the odometry's health): 1500 x 1000
+    // pixels, three would be 1500 x 600. The PNG's IHDR holds both, big-endian.
+    std::ifstream png(path("run/report.png"), std::ios::binary);
+    unsigned char header[24] = {};
+    ASSERT_TRUE(png.read(reinterpret_cast<char*>(header), sizeof header)) << "report.png";
+    const auto bigEndian = [&](int at) {
+      return (uint32_t(header[at]) << 24) | (uint32_t(header[at + 1]) << 16) | (uint32_t(header[at + 2]) << 8) |
+             uint32_t(header[at + 3]);
+    };
+    EXPECT_EQ(bigEndian(16), 1500u);
+    EXPECT_EQ(bigEndian(20), 1000u);
+  }
 
   // rim odometry on the same scans with the same settings: the very same poses.
   const test::RunResult odometry =

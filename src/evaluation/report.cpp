@@ -461,13 +461,22 @@ void plotRunReport(const RunPlotData& data, const std::string& png_path) {
   if (data.estimate.empty()) throw PlotError("no poses to plot for " + png_path);
   const bool truth = data.ground_truth.size() == data.estimate.size();
   const bool errors = data.position_errors_m.size() == data.estimate.size();
+  const std::size_t health_scans = data.inlier_share.size();
+  const bool health = health_scans > 0 && data.moving_share.size() == health_scans &&
+                      data.degenerate.size() == health_scans && data.suspect.size() == health_scans;
+  const int panels = 2 + int(errors) + int(health);
   // rim run's poses are of a lidar frame, z up: the top view is x-y.
   const std::array<int, 2> axes{0, 1};
   static constexpr std::array<const char*, 3> kAxisNames{"x", "y", "z"};
   TemporaryDirectory directory;
   const std::string poses_path = directory.file("poses.dat"), timing_path = directory.file("timing.dat");
+  const std::string health_path = directory.file("health.dat");
   {
-    std::ofstream poses(poses_path), timing(timing_path);
+    std::ofstream poses(poses_path), timing(timing_path), health_file(health_path);
+    health_file << "# scan, pixels paired %, moving %, degenerate, suspect\n";
+    for (std::size_t i = 0; health && i < health_scans; ++i)
+      health_file << i << ' ' << 100.0 * data.inlier_share[i] << ' ' << 100.0 * data.moving_share[i] << ' '
+                  << int(data.degenerate[i]) << ' ' << int(data.suspect[i]) << '\n';
     poses << "# scan, estimate " << kAxisNames[axes[0]] << ' ' << kAxisNames[axes[1]]
           << ", ground truth the same, position error m\n";
     for (std::size_t i = 0; i < data.estimate.size(); ++i) {
@@ -481,7 +490,8 @@ void plotRunReport(const RunPlotData& data, const std::string& png_path) {
       timing << i << ' ' << data.odometry_ms[i] << ' ' << data.integrate_ms[i] << '\n';
   }
   std::ostringstream script;
-  script << scriptHeader(png_path, 1500, 600) << "set multiplot layout 1," << (errors ? 3 : 2) << "\n"
+  script << scriptHeader(png_path, 1500, panels == 4 ? 1000 : 600) << "set multiplot layout "
+         << (panels == 4 ? "2,2" : "1," + std::to_string(panels)) << "\n"
          << "set title 'Trajectory (top view)'\nset xlabel '" << kAxisNames[axes[0]] << " [m]'\nset ylabel '"
          << kAxisNames[axes[1]] << " [m]'\nset size ratio -1\nset key below\n"
          << "plot " << (truth ? quoted(poses_path) + " using 4:5 with lines lw 3 lc rgb '#999999' title "
@@ -495,6 +505,15 @@ void plotRunReport(const RunPlotData& data, const std::string& png_path) {
   if (errors)
     script << "set title 'Position error (ATE)'\nset ylabel 'm'\n"
            << "plot " << quoted(poses_path) << " using 1:6 with lines lc rgb '#2ca02c' title 'error'\n";
+  // Degenerate scans marked at the bottom, suspect ones a little above.
+  if (health)
+    script << "set title 'Odometry health'\nset ylabel '% of the pixels it may pair'\nset yrange [-8:105]\n"
+           << "plot " << quoted(health_path) << " using 1:2 with lines lc rgb '#1f77b4' title 'paired', \\\n     "
+           << quoted(health_path) << " using 1:3 with lines lc rgb '#ff7f0e' title 'moving', \\\n     "
+           << quoted(health_path) << " using 1:($4 > 0 ? -5 : 1/0) with points pt 2 ps 1.5 lc rgb '#d62728' "
+           << "title 'degenerate (motion prior)', \\\n     "
+           << quoted(health_path) << " using 1:($5 > 0 ? -2 : 1/0) with points pt 9 ps 1.2 lc rgb '#9467bd' "
+           << "title 'suspect'\n";
   script << "unset multiplot\n";
   runGnuplot(directory, script.str(), png_path);
 }

@@ -20,6 +20,7 @@
 #include <chrono>
 #include <csignal>
 #include <filesystem>
+#include <limits>
 #include <iostream>
 #include <memory>
 #include <optional>
@@ -67,6 +68,8 @@ struct FrameRecord {
   double time_s = 0;
   double odometry_ms = 0, integrate_ms = 0;
   std::size_t inliers = 0;
+  double inlier_share = 0, moving_share = 0;  // NaN where the scan was not registered (a restart)
+  bool degenerate = false, suspect = false;
 };
 
 struct GroundTruthComparison {
@@ -199,8 +202,10 @@ RunRecord runScans(pipeline::ScanToMapPipeline& pipeline, const io::Recording& r
         if (result.has_pose) {
           const double time_s = double(result.scan_time_ns) * 1e-9;
           run.poses.push_back({time_s, result.world_from_lidar});
-          run.records.push_back(
-              {time_s, 1e3 * result.odometry_seconds, 1e3 * result.integrate_seconds, update.inliers});
+          const double unregistered = update.reset ? std::numeric_limits<double>::quiet_NaN() : 0.0;
+          run.records.push_back({time_s, 1e3 * result.odometry_seconds, 1e3 * result.integrate_seconds,
+                                 update.inliers, update.inlierShare() + unregistered,
+                                 update.movingShare() + unregistered, update.degenerate, update.suspect});
         }
         if (result.mesh) {
           run.mesh_update_ms.push_back(1e3 * result.mesh_seconds);
@@ -267,6 +272,12 @@ std::string plotRun(const RunRecord& run, const std::optional<GroundTruthCompari
   }
   plot.odometry_ms = odometry_ms;
   plot.integrate_ms = integrate_ms;
+  for (const FrameRecord& record : run.records) {
+    plot.inlier_share.push_back(record.inlier_share);
+    plot.moving_share.push_back(record.moving_share);
+    plot.degenerate.push_back(record.degenerate);
+    plot.suspect.push_back(record.suspect);
+  }
   try {
     evaluation::plotRunReport(plot, path);
     return "";

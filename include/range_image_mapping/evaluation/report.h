@@ -82,9 +82,15 @@ struct RunPlotData {
   std::vector<Eigen::Isometry3d> ground_truth;  // empty, or one per estimate pose
   std::vector<double> position_errors_m;        // empty, or one per estimate pose
   std::vector<double> odometry_ms, integrate_ms;  // per used scan
+  // The odometry's health per used scan (empty: no panel): shares of the
+  // pixels paired and found moving (0-1), and the scans that were degenerate
+  // (the motion prior used) or suspect.
+  std::vector<double> inlier_share, moving_share;
+  std::vector<uint8_t> degenerate, suspect;
 };
-// Three panels: the trajectory top view (x-y: lidar frames are z up; with the ground truth), the time per
-// scan of odometry and integration, and the position error per scan.
+// Up to four panels: the trajectory top view (x-y: lidar frames are z up; with the ground truth), the time
+// per scan of odometry and integration, the position error per scan (with the ground truth), and the
+// odometry's health per scan (when given): 1500 x 600 pixels for up to three, 1500 x 1000 for four.
 void plotRunReport(const RunPlotData& data, const std::string& png_path);
 
 // uint8 red/green/blue per point from its distance: blue (0) through green to
