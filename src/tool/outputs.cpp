@@ -283,20 +283,19 @@ int reportHealth(const OdometryHealth& health) {
 
 OdometryFramesCsv::OdometryFramesCsv(const std::string& path) : path_(path), file_(path) {
   if (!file_) throw std::runtime_error("cannot write " + path);
-  file_ << "frame,time_s,seconds,inliers,iterations,levels_passed_over,condition_number,residual_rms_m,degenerate,reset,"
-           "skipped,valid_pixels,inlier_share,moving_share,prior_difference_m,prior_difference_deg,keyframe,"
-           "keyframe_distance_m,warning\n";
+  file_ << "frame,time_s,seconds,inliers,iterations,levels_passed_over,condition_number,residual_rms_m,"
+           "degenerate,reset,skipped,valid_pixels,inlier_share,moving_share,prior_difference_m,"
+           "prior_difference_deg,keyframe,keyframe_distance_m,warning\n";
 }
 
 void OdometryFramesCsv::add(int frame, const registration::OdometryUpdate& update) {
   std::string warning = update.warning;
   std::replace(warning.begin(), warning.end(), ',', ';');
   file_ << frame << ',' << std::setprecision(15) << double(update.stamp_ns) * 1e-9 << std::setprecision(6) << ','
-        << update.seconds << ',' << update.inliers << ',' << update.iterations << ',' << update.levels_passed_over << ','
-        << update.condition_number
-        << ',' << update.residual_rms_m << ',' << update.degenerate << ',' << update.reset << ','
-        << update.skipped << ',' << update.valid_pixels << ',' << update.inlierShare() << ','
-        << update.movingShare() << ',' << update.prior_difference_m << ','
+        << update.seconds << ',' << update.inliers << ',' << update.iterations << ','
+        << update.levels_passed_over << ',' << update.condition_number << ',' << update.residual_rms_m << ','
+        << update.degenerate << ',' << update.reset << ',' << update.skipped << ',' << update.valid_pixels << ','
+        << update.inlierShare() << ',' << update.movingShare() << ',' << update.prior_difference_m << ','
         << update.prior_difference_rad * 180.0 / M_PI << ',' << update.keyframe << ',' << update.keyframe_distance_m
         << ',' << warning << '\n';
 }
