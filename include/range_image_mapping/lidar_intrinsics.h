@@ -18,13 +18,16 @@
 #include <string>
 #include <vector>
 
-// On a hot loop over plain arrays: an AVX2 clone besides the baseline build,
-// picked at load time for the CPU (the code is built without -march, for the
-// ABI shared with PCL and the nodelets). Elsewhere one version.
+// On a hot loop over plain arrays: AVX-512 and AVX2 clones besides the
+// baseline build, picked at load time for the CPU (the code is built without
+// -march, for the ABI shared with PCL and the nodelets). Elsewhere one
+// version. The libraries are built with -ffp-contract=off, so the AVX-512
+// clones (whose instructions include fused multiply-adds) round as the others
+// do and the poses are the same on every CPU.
 #if defined(__x86_64__) && (defined(__clang__) ? __clang_major__ >= 14 : defined(__GNUC__))
-#define RANGE_IMAGE_MAPPING_AVX2_CLONES __attribute__((target_clones("avx2", "default")))
+#define RANGE_IMAGE_MAPPING_SIMD_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
 #else
-#define RANGE_IMAGE_MAPPING_AVX2_CLONES
+#define RANGE_IMAGE_MAPPING_SIMD_CLONES
 #endif
 
 namespace range_image_mapping {

@@ -281,7 +281,7 @@ struct PointPointers {
 // to = offset + linear * (i, j, k) for each of count lattice coordinates,
 // rounded as Eigen's `offset + linear * v` (its 3-term sums associate to the
 // right), so that the voxel positions are those of the Eigen expression.
-RANGE_IMAGE_MAPPING_AVX2_CLONES
+RANGE_IMAGE_MAPPING_SIMD_CLONES
 void transformLattice(const Eigen::Vector3f& offset, const Eigen::Matrix3f& linear, const float* __restrict i_all,
                       const float* __restrict j_all, const float* __restrict k_all, std::size_t count,
                       float* __restrict x, float* __restrict y, float* __restrict z) {
@@ -485,7 +485,7 @@ std::vector<int> rowsByAltitude(const LidarIntrinsics& intrinsics) {
 // SweepMotion::toColumnFrame on plain floats, rounded as Eigen's
 // `rotation * point + translation` (its 3-term sums associate to the right,
 // the translation added last), so the coordinates are the same.
-RANGE_IMAGE_MAPPING_AVX2_CLONES
+RANGE_IMAGE_MAPPING_SIMD_CLONES
 void moveIntoColumnFrames(const ColumnMotion* inverse, const int* __restrict columns,
                           const uint32_t* __restrict voxels, const float* __restrict x_all,
                           const float* __restrict y_all, const float* __restrict z_all, std::size_t count,

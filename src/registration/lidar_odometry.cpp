@@ -64,8 +64,8 @@ enum PointVerdict : uint8_t { kAgrees = 0, kInFrontByMargin, kInFrontByShare, kB
 // so that it vectorises (the target look-ups as gathers). A point without a
 // hit, or whose pixel has no finite point and normal, agrees. The dot
 // products and norms sum three terms as Eigen's do, a + (b + c).
-// Cloned for AVX2 (no FMA).
-RANGE_IMAGE_MAPPING_AVX2_CLONES
+// Cloned for AVX2 and AVX-512 (no FMA).
+RANGE_IMAGE_MAPPING_SIMD_CLONES
 void judgePoints(const float* x, const float* y, const float* z, const ProjectedPixel* pixels, const uint8_t* hits,
                  std::size_t count, const float* target_points, const float* target_normals, int target_columns,
                  const float* row_gap_rad, float margin, float twice_margin, uint8_t* __restrict verdicts) {
@@ -91,9 +91,9 @@ void judgePoints(const float* x, const float* y, const float* z, const Projected
   }
 }
 
-// Whether each normal (xyz triples) is finite. Cloned for AVX2.
+// Whether each normal (xyz triples) is finite. Cloned for AVX2 and AVX-512.
 constexpr std::size_t kClassifyChunk = 1024;
-RANGE_IMAGE_MAPPING_AVX2_CLONES
+RANGE_IMAGE_MAPPING_SIMD_CLONES
 void finiteNormals(const float* normals, std::size_t count, uint8_t* __restrict has_normal) {
   constexpr float kLargest = std::numeric_limits<float>::max();
   for (std::size_t k = 0; k < count; ++k)
@@ -107,9 +107,9 @@ void finiteNormals(const float* normals, std::size_t count, uint8_t* __restrict 
 // motions[j * columns + u]. Each coordinate as Eigen computes
 // motion.leftCols<3>() * p + motion.col(3): the first product plus the sum
 // of the other two, then the translation. Plain arrays, so that it
-// vectorises; the output must not overlap the input. Cloned for AVX2 (no
+// vectorises; the output must not overlap the input. Cloned for AVX2 and AVX-512 (no
 // FMA).
-RANGE_IMAGE_MAPPING_AVX2_CLONES
+RANGE_IMAGE_MAPPING_SIMD_CLONES
 void moveRow(const float* points, const float* normals, const float* motions, std::size_t columns,
              float* __restrict moved_points, float* __restrict moved_normals) {
   for (std::size_t u = 0; u < columns; ++u) {

@@ -53,10 +53,10 @@ struct ChunkPairs {
 // stays exact to about 1e-6 of the chunk's sum, far below what the solve
 // resolves (the chunks are then summed in double). All 28 in one pass over
 // the chunk, each row read once per lane group; every lane still adds its
-// terms in the order of k. Cloned for AVX2: the eight lanes in one register
-// instead of two, the same sums (no FMA).
+// terms in the order of k. Cloned for AVX2 and AVX-512: the eight lanes in
+// one register instead of two, the same sums (no FMA).
 constexpr std::size_t kChunkSums = 28;
-RANGE_IMAGE_MAPPING_AVX2_CLONES
+RANGE_IMAGE_MAPPING_SIMD_CLONES
 void chunkSums(const float (*rows)[kProjectionChunk], std::size_t padded, double* sums) {
   // kLanes floats as one value (GCC's vector extension): element-wise float
   // arithmetic, one register with AVX2, two without.
@@ -92,9 +92,9 @@ constexpr int kTransformFloats = ColumnMotion::SizeAtCompileTime;
 // target_from_source transform composed with the column's deskew motion,
 // gathered per point), else 0 (one transform for all). Each coordinate sums
 // its three products left to right, then adds the translation. Plain arrays
-// over separate coordinates so that it vectorises; cloned for AVX2 (no FMA:
+// over separate coordinates so that it vectorises; cloned for AVX2 and AVX-512 (no FMA:
 // every product rounds).
-RANGE_IMAGE_MAPPING_AVX2_CLONES
+RANGE_IMAGE_MAPPING_SIMD_CLONES
 void moveChunk(const float* const* source, std::size_t first, const int* columns, std::size_t count,
                const float* transforms, std::size_t stride, bool per_column,
                float (*__restrict moved)[kProjectionChunk]) {
@@ -141,8 +141,8 @@ struct TargetArrays {
 // normal has a zero one: m.n >= cos |m|^2 holds for it. moved holds the
 // moved points and normals (moveChunk). The rows must not overlap the inputs
 // (restrict: gathers are not vectorised past stores that may alias them).
-// Cloned for AVX2. Returns the number of pairs.
-RANGE_IMAGE_MAPPING_AVX2_CLONES
+// Cloned for AVX2 and AVX-512. Returns the number of pairs.
+RANGE_IMAGE_MAPPING_SIMD_CLONES
 std::size_t pairRows(const ChunkCoordinates& moved, const ProjectedPixel* pixels, const uint8_t* hits,
                      std::size_t count, const TargetArrays& target, float max_distance_squared, float min_cosine,
                      float (*__restrict rows)[kProjectionChunk]) {
@@ -172,8 +172,8 @@ std::size_t pairRows(const ChunkCoordinates& moved, const ProjectedPixel* pixels
 // The area weights (range^2 up to the cap, over the cap's square) of a
 // chunk's moved points: each pair's weight multiplied by its point's, and
 // the point's in paired_areas where it has a pair (a non-zero normal row),
-// else zero. Cloned for AVX2.
-RANGE_IMAGE_MAPPING_AVX2_CLONES
+// else zero. Cloned for AVX2 and AVX-512.
+RANGE_IMAGE_MAPPING_SIMD_CLONES
 void areaWeights(const ChunkCoordinates& moved, float (*__restrict rows)[kProjectionChunk], std::size_t count,
                  float max_range_squared, float* __restrict paired_areas) {
   float* weights = rows[ChunkPairs::kWeight];

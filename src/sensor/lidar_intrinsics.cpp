@@ -335,9 +335,10 @@ std::optional<ProjectedPixel> LidarModel::solveProjection(const Eigen::Vector3f&
 // The same arithmetic as solveProjection, in passes over blocks of points so
 // that the compiler vectorises the square roots, divisions and table look-ups
 // (as gathers). A point whose row changes on the re-check (rare) takes the
-// scalar path. Cloned for AVX2 (eight lanes instead of four; without FMA,
-// so every operation rounds as in solveProjection and the pixels are the same).
-RANGE_IMAGE_MAPPING_AVX2_CLONES
+// scalar path. Cloned for AVX2 and AVX-512 (eight or sixteen lanes instead of
+// four; without FMA, so every operation rounds as in solveProjection and the
+// pixels are the same).
+RANGE_IMAGE_MAPPING_SIMD_CLONES
 void LidarModel::projectMany(const float* x_all, const float* y_all, const float* z_all, std::size_t count,
                              ProjectedPixel* pixels, uint8_t* hits) const {
   constexpr std::size_t kBlock = 256;

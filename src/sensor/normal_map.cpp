@@ -144,8 +144,8 @@ struct CrossTangents {
 // the same float operations in the same order as the general path (so the
 // same bits); done[column] says which pixels it did. Columns [first, last)
 // need no wrap; ranges are read every range_step elements, points (xyz
-// triples) are the level's. Cloned for AVX2 (which has no FMA to fuse them).
-RANGE_IMAGE_MAPPING_AVX2_CLONES
+// triples) are the level's. Cloned for AVX2 and AVX-512 (which has no FMA to fuse them).
+RANGE_IMAGE_MAPPING_SIMD_CLONES
 void interiorCrossProducts(const float* centre_ranges, const float* up_ranges, const float* down_ranges,
                            int range_step, const float* centre_points, const float* up_points,
                            const float* down_points, int up_shift, int down_shift, int first, int last,
@@ -167,7 +167,7 @@ void interiorCrossProducts(const float* centre_ranges, const float* up_ranges, c
 // normal if the pixel lies within max_chord_offset of both chords (the
 // segment between its row neighbours, and between the rows above and
 // below), else none; the general path's arithmetic, to the bit.
-RANGE_IMAGE_MAPPING_AVX2_CLONES
+RANGE_IMAGE_MAPPING_SIMD_CLONES
 void inLineCrossProducts(const float* centre_ranges, const float* up_ranges, const float* down_ranges,
                          int range_step, const float* centre_points, const float* up_points, const float* down_points,
                          int up_shift, int down_shift, int first, int last, float jump_per_pixel,

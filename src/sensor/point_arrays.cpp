@@ -4,7 +4,7 @@
 
 namespace range_image_mapping {
 
-RANGE_IMAGE_MAPPING_AVX2_CLONES
+RANGE_IMAGE_MAPPING_SIMD_CLONES
 void transformToArrays(const float* points, std::size_t count, const float* transform, float* __restrict x,
                        float* __restrict y, float* __restrict z) {
   float* const moved[3] = {x, y, z};
