@@ -107,8 +107,8 @@ void finiteNormals(const float* normals, std::size_t count, uint8_t* __restrict 
 // motions[j * columns + u]. Each coordinate as Eigen computes
 // motion.leftCols<3>() * p + motion.col(3): the first product plus the sum
 // of the other two, then the translation. Plain arrays, so that it
-// vectorises; the output must not overlap the input. Cloned for AVX2 and AVX-512 (no
-// FMA).
+// vectorises; the output must not overlap the input. Cloned for AVX2 and
+// AVX-512 (no fused multiply-adds).
 RANGE_IMAGE_MAPPING_SIMD_CLONES
 void moveRow(const float* points, const float* normals, const float* motions, std::size_t columns,
              float* __restrict moved_points, float* __restrict moved_normals) {

@@ -202,8 +202,8 @@ static_assert(sizeof(Eigen::Vector3f) == 3 * sizeof(float) && sizeof(LatticeKey)
 // Points (xyz triples) moved by [R | t] (a 4 x 4 matrix's first 12 floats,
 // column-major), each one's voxel (xyz triples) of the grid 1 / inverse_size
 // wide and its map: as keyOf and partitionOfHash, over plain arrays so that it
-// vectorises. Cloned for AVX2 and AVX-512 (no FMA: the same sums in the same order as
-// Eigen's product, so the same floats).
+// vectorises. Cloned for AVX2 and AVX-512 (no fused multiply-adds: the same
+// sums in the same order as Eigen's product, so the same floats).
 RANGE_IMAGE_MAPPING_SIMD_CLONES
 void moveAndBin(const float* points, std::size_t count, const float* transform, float inverse_size,
                 float* __restrict moved, int* __restrict keys, uint8_t* __restrict partitions) {

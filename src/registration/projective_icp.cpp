@@ -92,8 +92,8 @@ constexpr int kTransformFloats = ColumnMotion::SizeAtCompileTime;
 // target_from_source transform composed with the column's deskew motion,
 // gathered per point), else 0 (one transform for all). Each coordinate sums
 // its three products left to right, then adds the translation. Plain arrays
-// over separate coordinates so that it vectorises; cloned for AVX2 and AVX-512 (no FMA:
-// every product rounds).
+// over separate coordinates so that it vectorises; cloned for AVX2 and
+// AVX-512 (no fused multiply-adds: every product rounds).
 RANGE_IMAGE_MAPPING_SIMD_CLONES
 void moveChunk(const float* const* source, std::size_t first, const int* columns, std::size_t count,
                const float* transforms, std::size_t stride, bool per_column,

@@ -144,7 +144,8 @@ struct CrossTangents {
 // the same float operations in the same order as the general path (so the
 // same bits); done[column] says which pixels it did. Columns [first, last)
 // need no wrap; ranges are read every range_step elements, points (xyz
-// triples) are the level's. Cloned for AVX2 and AVX-512 (which has no FMA to fuse them).
+// triples) are the level's. Cloned for AVX2 and AVX-512 (products never
+// fused: the libraries are built with -ffp-contract=off).
 RANGE_IMAGE_MAPPING_SIMD_CLONES
 void interiorCrossProducts(const float* centre_ranges, const float* up_ranges, const float* down_ranges,
                            int range_step, const float* centre_points, const float* up_points,

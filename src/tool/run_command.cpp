@@ -202,10 +202,10 @@ RunRecord runScans(pipeline::ScanToMapPipeline& pipeline, const io::Recording& r
         if (result.has_pose) {
           const double time_s = double(result.scan_time_ns) * 1e-9;
           run.poses.push_back({time_s, result.world_from_lidar});
-          const double unregistered = update.reset ? std::numeric_limits<double>::quiet_NaN() : 0.0;
+          constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();  // a gap in report.png
           run.records.push_back({time_s, 1e3 * result.odometry_seconds, 1e3 * result.integrate_seconds,
-                                 update.inliers, update.inlierShare() + unregistered,
-                                 update.movingShare() + unregistered, update.degenerate, update.suspect});
+                                 update.inliers, update.reset ? kNaN : update.inlierShare(),
+                                 update.reset ? kNaN : update.movingShare(), update.degenerate, update.suspect});
         }
         if (result.mesh) {
           run.mesh_update_ms.push_back(1e3 * result.mesh_seconds);
