@@ -209,6 +209,17 @@ std::array<int, 2> topViewAxes(const std::vector<Eigen::Isometry3d>& poses) {
   return {0, 1};
 }
 
+// gnuplot's ranges for a top view of these points (nothing where none is finite).
+std::string topViewRangeCommands(const std::vector<Eigen::Vector2d>& points) {
+  const TopViewRanges ranges = topViewRanges(points);
+  if (ranges.empty) return {};
+  std::ostringstream text;
+  text.precision(10);
+  text << "set xrange [" << ranges.minimum.x() << ":" << ranges.maximum.x() << "]\nset yrange ["
+       << ranges.minimum.y() << ":" << ranges.maximum.y() << "]\n";
+  return text.str();
+}
+
 // ---------------------------------------------------------------- colours
 
 using Colour = std::array<uint8_t, 3>;
@@ -330,6 +341,30 @@ std::string surfaceReportJson(const SurfaceMetrics& metrics, const SurfaceReport
   return writeJson(toJson(context.notes, report));
 }
 
+TopViewRanges topViewRanges(const std::vector<Eigen::Vector2d>& points, double least_aspect) {
+  TopViewRanges ranges;
+  ranges.minimum.setConstant(std::numeric_limits<double>::infinity());
+  ranges.maximum = -ranges.minimum;
+  for (const Eigen::Vector2d& point : points) {
+    if (!point.allFinite()) continue;
+    ranges.minimum = ranges.minimum.cwiseMin(point);
+    ranges.maximum = ranges.maximum.cwiseMax(point);
+    ranges.empty = false;
+  }
+  if (ranges.empty) return TopViewRanges{};
+  // A single point (or a sensor standing still) still gets a range gnuplot can draw.
+  constexpr double kLeastSpan_m = 1.0;
+  const Eigen::Vector2d extent = ranges.maximum - ranges.minimum;
+  const double least = std::max(kLeastSpan_m, std::max(0.0, least_aspect) * extent.maxCoeff());
+  for (int axis = 0; axis < 2; ++axis) {
+    if (extent[axis] >= least) continue;
+    const double middle = 0.5 * (ranges.minimum[axis] + ranges.maximum[axis]);
+    ranges.minimum[axis] = middle - 0.5 * least;
+    ranges.maximum[axis] = middle + 0.5 * least;
+  }
+  return ranges;
+}
+
 std::string trajectorySummaryLine(const TrajectoryEvaluation& evaluation) {
   std::string line = "ATE " + formatted("%.4f", evaluation.absolute_translation_m.rmse) + " m RMSE (" +
                      alignmentName(evaluation.alignment) + ", " +
@@ -407,8 +442,12 @@ void plotTrajectoryTopView(const TrajectoryEvaluation& evaluation, const std::st
            << estimate[axes[1]] << ' ' << evaluation.position_errors_m[i] << '\n';
     }
   }
+  std::vector<Eigen::Vector2d> plotted;
+  for (const std::vector<Eigen::Isometry3d>* poses : {&evaluation.ground_truth, &evaluation.aligned_estimate})
+    for (const Eigen::Isometry3d& pose : *poses)
+      plotted.emplace_back(pose.translation()[axes[0]], pose.translation()[axes[1]]);
   std::ostringstream script;
-  script << scriptHeader(png_path, 1000, 900)
+  script << scriptHeader(png_path, 1000, 900) << topViewRangeCommands(plotted)
          << "set title 'Trajectory top view: ATE RMSE "
          << formatted("%.4f", evaluation.absolute_translation_m.rmse) << " m ("
          << alignmentName(evaluation.alignment) << " alignment)'\n"
@@ -489,17 +528,22 @@ void plotRunReport(const RunPlotData& data, const std::string& png_path) {
     for (std::size_t i = 0; i < std::min(data.odometry_ms.size(), data.integrate_ms.size()); ++i)
       timing << i << ' ' << data.odometry_ms[i] << ' ' << data.integrate_ms[i] << '\n';
   }
+  std::vector<Eigen::Vector2d> plotted;
+  for (std::size_t i = 0; i < data.estimate.size(); ++i) {
+    plotted.emplace_back(data.estimate[i].translation()[axes[0]], data.estimate[i].translation()[axes[1]]);
+    if (truth) plotted.emplace_back(data.ground_truth[i].translation()[axes[0]], data.ground_truth[i].translation()[axes[1]]);
+  }
   std::ostringstream script;
   script << scriptHeader(png_path, 1500, panels == 4 ? 1000 : 600) << "set multiplot layout "
          << (panels == 4 ? "2,2" : "1," + std::to_string(panels)) << "\n"
-         << "set title 'Trajectory (top view)'\nset xlabel '" << kAxisNames[axes[0]] << " [m]'\nset ylabel '"
+         << topViewRangeCommands(plotted) << "set title 'Trajectory (top view)'\nset xlabel '" << kAxisNames[axes[0]] << " [m]'\nset ylabel '"
          << kAxisNames[axes[1]] << " [m]'\nset size ratio -1\nset key below\n"
          << "plot " << (truth ? quoted(poses_path) + " using 4:5 with lines lw 3 lc rgb '#999999' title "
                                 "'ground truth', \\\n     "
                               : std::string())
          << quoted(poses_path) << " using 2:3 with lines lw 2 lc rgb '#1f77b4' title 'estimate"
          << (truth ? " (aligned)" : "") << "'\n"
-         << "set size noratio\nset title 'Time per scan'\nset xlabel 'scan'\nset ylabel 'ms'\n"
+         << "set size noratio\nset autoscale xy\nset title 'Time per scan'\nset xlabel 'scan'\nset ylabel 'ms'\n"
          << "plot " << quoted(timing_path) << " using 1:2 with lines lc rgb '#1f77b4' title 'odometry', \\\n     "
          << quoted(timing_path) << " using 1:3 with lines lc rgb '#d62728' title 'TSDF integration'\n";
   if (errors)

@@ -70,6 +70,16 @@ class PlotError : public std::runtime_error {
 // The gnuplot executable found on PATH, or "" when there is none.
 std::string findGnuplot();
 
+// The plotted ranges of a top view drawn at equal scales on both axes: the
+// points' extent, the shorter axis widened about its middle to at least
+// least_aspect of the longer one (a straight drive would otherwise be drawn as
+// a strip a few pixels high). Empty ranges (no finite point) stay empty.
+struct TopViewRanges {
+  Eigen::Vector2d minimum = Eigen::Vector2d::Zero(), maximum = Eigen::Vector2d::Zero();
+  bool empty = true;
+};
+TopViewRanges topViewRanges(const std::vector<Eigen::Vector2d>& points, double least_aspect = 1.0 / 3.0);
+
 // Top view (x-y) of the ground truth and the aligned estimate, the estimate
 // coloured by its position error.
 void plotTrajectoryTopView(const TrajectoryEvaluation& evaluation, const std::string& png_path);
