@@ -530,14 +530,17 @@ void plotRunReport(const RunPlotData& data, const std::string& png_path) {
   }
   std::vector<Eigen::Vector2d> plotted;
   for (std::size_t i = 0; i < data.estimate.size(); ++i) {
-    plotted.emplace_back(data.estimate[i].translation()[axes[0]], data.estimate[i].translation()[axes[1]]);
-    if (truth) plotted.emplace_back(data.ground_truth[i].translation()[axes[0]], data.ground_truth[i].translation()[axes[1]]);
+    const Eigen::Vector3d& estimate = data.estimate[i].translation();
+    plotted.emplace_back(estimate[axes[0]], estimate[axes[1]]);
+    if (!truth) continue;
+    const Eigen::Vector3d& truth_position = data.ground_truth[i].translation();
+    plotted.emplace_back(truth_position[axes[0]], truth_position[axes[1]]);
   }
   std::ostringstream script;
   script << scriptHeader(png_path, 1500, panels == 4 ? 1000 : 600) << "set multiplot layout "
          << (panels == 4 ? "2,2" : "1," + std::to_string(panels)) << "\n"
-         << topViewRangeCommands(plotted) << "set title 'Trajectory (top view)'\nset xlabel '" << kAxisNames[axes[0]] << " [m]'\nset ylabel '"
-         << kAxisNames[axes[1]] << " [m]'\nset size ratio -1\nset key below\n"
+         << topViewRangeCommands(plotted) << "set title 'Trajectory (top view)'\nset xlabel '" << kAxisNames[axes[0]]
+         << " [m]'\nset ylabel '" << kAxisNames[axes[1]] << " [m]'\nset size ratio -1\nset key below\n"
          << "plot " << (truth ? quoted(poses_path) + " using 4:5 with lines lw 3 lc rgb '#999999' title "
                                 "'ground truth', \\\n     "
                               : std::string())
