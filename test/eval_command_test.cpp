@@ -156,6 +156,23 @@ TEST_F(EvalCommand, TrajectoryPlotsArePngs) {
   ASSERT_EQ(report["outputs"].size(), 2u);
   EXPECT_EQ(report["outputs"][0].asString(), path("plots") + "/trajectory_top_view.png");
   EXPECT_EQ(report["warnings"].size(), 0u);
+
+  // A straight drive far from the origin: the top view's ranges are widened
+  // around it, and the colour range of the errors must still be found.
+  std::vector<Eigen::Isometry3d> straight(60, Eigen::Isometry3d::Identity()), drifting;
+  for (std::size_t i = 0; i < straight.size(); ++i) {
+    straight[i].translation() = Eigen::Vector3d(500.0 + 0.8 * double(i), -300.0, 0.0);
+    drifting.push_back(straight[i]);
+    drifting.back().translation().y() += 0.001 * double(i);
+  }
+  io::writeKittiPoses(path("straight.txt"), straight);
+  io::writeKittiPoses(path("drifting.txt"), drifting);
+  const RunResult far = rim("eval traj '" + path("drifting.txt") + "' '" + path("straight.txt") + "' --plots '" +
+                            path("far_plots") + "' --json '" + path("far.json") + "'");
+  ASSERT_EQ(far.exit_code, 0) << far.err;
+  const Json::Value far_report = parseJson(readText(path("far.json")));
+  EXPECT_TRUE(isPng(path("far_plots/trajectory_top_view.png")));
+  EXPECT_EQ(far_report["warnings"].size(), 0u) << far.err;
 }
 
 TEST_F(EvalCommand, WithoutGnuplotTheJsonIsStillWritten) {

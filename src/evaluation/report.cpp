@@ -431,6 +431,7 @@ void plotTrajectoryTopView(const TrajectoryEvaluation& evaluation, const std::st
   static constexpr std::array<const char*, 3> kAxisNames{"x", "y", "z"};
   TemporaryDirectory directory;
   const std::string data_path = directory.file("trajectory.dat");
+  std::vector<Eigen::Vector2d> plotted;  // for the ranges
   {
     std::ofstream data(data_path);
     data << "# ground truth " << kAxisNames[axes[0]] << ' ' << kAxisNames[axes[1]]
@@ -440,14 +441,12 @@ void plotTrajectoryTopView(const TrajectoryEvaluation& evaluation, const std::st
       const Eigen::Vector3d& estimate = evaluation.aligned_estimate[i].translation();
       data << truth[axes[0]] << ' ' << truth[axes[1]] << ' ' << estimate[axes[0]] << ' '
            << estimate[axes[1]] << ' ' << evaluation.position_errors_m[i] << '\n';
+      plotted.emplace_back(truth[axes[0]], truth[axes[1]]);
+      plotted.emplace_back(estimate[axes[0]], estimate[axes[1]]);
     }
   }
-  std::vector<Eigen::Vector2d> plotted;
-  for (const std::vector<Eigen::Isometry3d>* poses : {&evaluation.ground_truth, &evaluation.aligned_estimate})
-    for (const Eigen::Isometry3d& pose : *poses)
-      plotted.emplace_back(pose.translation()[axes[0]], pose.translation()[axes[1]]);
   std::ostringstream script;
-  script << scriptHeader(png_path, 1000, 900) << topViewRangeCommands(plotted)
+  script << scriptHeader(png_path, 1000, 900)
          << "set title 'Trajectory top view: ATE RMSE "
          << formatted("%.4f", evaluation.absolute_translation_m.rmse) << " m ("
          << alignmentName(evaluation.alignment) << " alignment)'\n"
@@ -459,7 +458,8 @@ void plotTrajectoryTopView(const TrajectoryEvaluation& evaluation, const std::st
          // A constant error (e.g. zero) gives no colour range of its own.
          << "stats " << quoted(data_path) << " using 5 nooutput\n"
          << "if (STATS_max <= STATS_min) { set cbrange [STATS_min:STATS_min + 1e-3] }\n"
-         << "plot " << quoted(data_path) << " using 1:2 with lines lw 3 lc rgb '#999999' title 'ground truth', \\\n"
+         // After stats, which would filter the errors column by the x range.
+         << topViewRangeCommands(plotted) << "plot " << quoted(data_path) << " using 1:2 with lines lw 3 lc rgb '#999999' title 'ground truth', \\\n"
          << "     " << quoted(data_path) << " using 3:4:5 with lines lw 2 palette title 'estimate (aligned)'\n";
   runGnuplot(directory, script.str(), png_path);
 }
@@ -510,6 +510,7 @@ void plotRunReport(const RunPlotData& data, const std::string& png_path) {
   TemporaryDirectory directory;
   const std::string poses_path = directory.file("poses.dat"), timing_path = directory.file("timing.dat");
   const std::string health_path = directory.file("health.dat");
+  std::vector<Eigen::Vector2d> plotted;  // for the ranges
   {
     std::ofstream poses(poses_path), timing(timing_path), health_file(health_path);
     health_file << "# scan, pixels paired %, moving %, degenerate, suspect\n";
@@ -523,18 +524,12 @@ void plotRunReport(const RunPlotData& data, const std::string& png_path) {
       const Eigen::Vector3d truth_position = truth ? data.ground_truth[i].translation() : estimate;
       poses << i << ' ' << estimate[axes[0]] << ' ' << estimate[axes[1]] << ' ' << truth_position[axes[0]] << ' '
             << truth_position[axes[1]] << ' ' << (errors ? data.position_errors_m[i] : 0.0) << '\n';
+      plotted.emplace_back(estimate[axes[0]], estimate[axes[1]]);
+      plotted.emplace_back(truth_position[axes[0]], truth_position[axes[1]]);
     }
     timing << "# scan, odometry ms, integration ms\n";
     for (std::size_t i = 0; i < std::min(data.odometry_ms.size(), data.integrate_ms.size()); ++i)
       timing << i << ' ' << data.odometry_ms[i] << ' ' << data.integrate_ms[i] << '\n';
-  }
-  std::vector<Eigen::Vector2d> plotted;
-  for (std::size_t i = 0; i < data.estimate.size(); ++i) {
-    const Eigen::Vector3d& estimate = data.estimate[i].translation();
-    plotted.emplace_back(estimate[axes[0]], estimate[axes[1]]);
-    if (!truth) continue;
-    const Eigen::Vector3d& truth_position = data.ground_truth[i].translation();
-    plotted.emplace_back(truth_position[axes[0]], truth_position[axes[1]]);
   }
   std::ostringstream script;
   script << scriptHeader(png_path, 1500, panels == 4 ? 1000 : 600) << "set multiplot layout "
