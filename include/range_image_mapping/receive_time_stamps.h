@@ -1,10 +1,22 @@
-// Scan stamps taken from the time a revolution's first packet was received,
-// kept strictly increasing. ROS time can stand still between two revolutions:
-// a bag replay's /clock is a topic like any other, and on a loaded machine its
-// updates are delivered late, so two revolutions 0.1 s apart were both stamped
-// with the same clock value and the Odometry refused the second as out of
-// order. Such a scan is stamped the sensor clock's interval after the previous
-// one instead, and counted, so that the cause can be named.
+// Scan stamps on ROS time for a sensor whose clock is not synchronised to it
+// (stamp_source receive_time): the sensor clock mapped onto ROS time,
+//   stamp = sensor time + offset,
+// where the offset (ROS time minus sensor time) follows the receipt of each
+// revolution's first packet. A receipt is never early, only late: a process
+// that stalled (heavy load, a paused machine) reads a backlog of packets at
+// once, and stamping each scan with its receipt bunched the backlog's scans
+// 0.1 s apart into milliseconds, so that the Odometry refused them as out of
+// order. The offset therefore moves towards a receipt by at most kDriftRate
+// of the sensor time passed (1 %, far beyond any quartz clock's drift), and a
+// late receipt, or an early one under a /clock that stood still, shifts the
+// stamps by at most that much. Two cases re-anchor the offset to the receipt,
+// counted as clock steps: the sensor clock went back or leapt ahead of the
+// receipts, or the receipts stayed more than kStep off the mapping while
+// keeping the sensor clock's pace for kStepConfirm (ROS time was stepped).
+// Stamps are kept strictly increasing: a stamp that would not advance (a
+// sensor clock that stands still, so the receipts are all there is) is put
+// the sensor clock's interval, or the nominal period, after the previous one,
+// and counted as repaired.
 #pragma once
 
 #include <cstddef>
@@ -20,25 +32,47 @@ class ReceiveTimeStamps {
 
   struct Stamp {
     int64_t stamp_ns = 0;
-    bool repaired = false;  // the receive time did not advance past the previous stamp
+    int64_t receipt_delay_ns = 0;  // receipt minus the mapped sensor time: how late the scan was read
+    bool repaired = false;         // the mapped stamp did not advance past the previous one
+    bool clock_step = false;       // the offset was set anew (not on the first scan)
   };
   // receipt_ns: ROS time of the revolution's first packet; sensor_ns: the
-  // scan's stamp on the sensor's clock. A receipt a second or more behind the
-  // previous stamp is ROS time going back (a bag loop): taken as it is.
+  // scan's stamp on the sensor's clock. A stamp a second or more behind the
+  // previous one is ROS time going back (a bag loop): taken as it is.
   Stamp next(int64_t receipt_ns, int64_t sensor_ns);
   // A new sensor setting (metadata): the sequence goes on with another period.
   void setNominalPeriod(int64_t nominal_period_ns);
   // ROS time jumped back: the next receipt starts a new sequence.
   void restart() { has_previous_ = false; }
   std::size_t repaired() const { return repaired_; }
+  std::size_t clockSteps() const { return clock_steps_; }
+  // Scans read kLateReceipt or more after the mapping says they were sent
+  // (a stall or a backlog), and kEarlyReceipt or more before it (ROS time
+  // stood still or lagged: a late /clock).
+  std::size_t lateReceipts() const { return late_receipts_; }
+  std::size_t earlyReceipts() const { return early_receipts_; }
+
+  static constexpr double kDriftRate = 0.01;
+  static constexpr int64_t kStep_ns = 250'000'000;
+  static constexpr int64_t kStepConfirm_ns = 2'000'000'000;
+  static constexpr int64_t kLateReceipt_ns = 500'000'000;
+  static constexpr int64_t kEarlyReceipt_ns = 50'000'000;
 
  private:
   static constexpr int64_t kLongestRepair_ns = 1'000'000'000;
+  void anchor(int64_t receipt_ns, int64_t sensor_ns);
+
   int64_t nominal_period_ns_;
   bool has_previous_ = false;
+  int64_t offset_ns_ = 0;
   int64_t previous_stamp_ns_ = 0;
   int64_t previous_sensor_ns_ = 0;
+  int64_t previous_receipt_ns_ = 0;
+  int64_t step_evidence_ns_ = 0;  // sensor time over which the receipts kept pace kStep away
   std::size_t repaired_ = 0;
+  std::size_t clock_steps_ = 0;
+  std::size_t late_receipts_ = 0;
+  std::size_t early_receipts_ = 0;
 };
 
 }  // namespace range_image_mapping

@@ -204,16 +204,22 @@ class AdapterNodelet : public nodelet::Nodelet {
   // flush, so it is one of these two.
   uint32_t current_frame_id_ = 0, previous_frame_id_ = 0;
   ros::Time current_frame_receipt_, previous_frame_receipt_;
-  // Receive-time stamps kept increasing where ROS time stood still.
+  // Receive-time stamps: the sensor clock mapped onto ROS time.
   std::optional<ReceiveTimeStamps> receive_stamps_;
-  std::size_t logged_restamped_scans_ = 0;
+  struct StampCounts {
+    std::size_t restamped = 0, clock_steps = 0, late = 0, early = 0;
+  };
+  StampCounts stampCounts() const;
+  StampCounts logged_stamp_counts_;
   bool revolution_in_progress_ = false;
   ros::SteadyTime last_packet_time_;
+  int idle_checks_ = 0;  // onIdleCheck calls in a row that found no packet for flush_after_idle
   ros::Time last_receipt_;  // to notice ROS time jumping back (a bag loop)
   // diagnosePackets, per kind of problem (drops, incomplete scans, restamped
-  // scans): the count at its previous call, and when it last grew.
-  std::array<std::size_t, 3> diagnosed_packet_problems_{};
-  std::array<ros::SteadyTime, 3> last_packet_problem_;
+  // scans and clock steps, late or early receipts): the count at its previous
+  // call, and when it last grew.
+  std::array<std::size_t, 4> diagnosed_packet_problems_{};
+  std::array<ros::SteadyTime, 4> last_packet_problem_;
 
   // PointCloud2 state.
   PointCloudInput cloud_input_;  // reused per cloud
@@ -244,7 +250,7 @@ class AdapterNodelet : public nodelet::Nodelet {
   ProjectionStatistics logged_projection_statistics_;
   AdapterDrops logged_drops_;
   SteadyThrottle foreign_packet_log_, no_metadata_log_, packet_error_log_, scan_error_log_, restamp_log_,
-      flush_error_log_, cloud_error_log_;
+      receipt_log_, flush_error_log_, cloud_error_log_;
 };
 
 void AdapterNodelet::onInit() {
@@ -475,17 +481,41 @@ ros::Time AdapterNodelet::receiveStamp(uint32_t frame_id, uint64_t sensor_stamp_
   if (!receive_stamps_) return receipt;
   const ReceiveTimeStamps::Stamp stamp =
       receive_stamps_->next(static_cast<int64_t>(receipt.toNSec()), static_cast<int64_t>(sensor_stamp_ns));
-  ros::Time repaired;
-  repaired.fromNSec(static_cast<uint64_t>(stamp.stamp_ns));
-  if (!stamp.repaired) return repaired;
-  if (restamp_log_.allow(parameters_.statistics_period_s))
-    NODELET_WARN("scan %u: ROS time did not advance since the previous scan (received at %.3f s): stamped %.3f s, "
-                 "the sensor clock's interval after it, so that no scan is refused as out of order. ROS time is "
-                 "stalling: a bag replay's /clock delivered late on a loaded machine (replay slower, e.g. "
-                 "rate:=0.5), or the host clock stepped; with a PTP-synchronised sensor use stamp_source: "
-                 "sensor_clock. %zu scans restamped so far",
-                 frame_id, receipt.toSec(), repaired.toSec(), receive_stamps_->repaired());
-  return repaired;
+  ros::Time stamped;
+  stamped.fromNSec(static_cast<uint64_t>(stamp.stamp_ns));
+  const double delay_s = static_cast<double>(stamp.receipt_delay_ns) * 1e-9;
+  if ((stamp.clock_step || stamp.repaired) && restamp_log_.allow(parameters_.statistics_period_s)) {
+    if (stamp.clock_step)
+      NODELET_WARN("scan %u: received at %.3f s, %.3f s off the sensor clock's mapping onto ROS time: ROS time or "
+                   "the sensor clock stepped (host clock set, a bag loop, the sensor's clock reset or "
+                   "synchronised). Stamps follow the receipt from here (%zu clock steps so far)",
+                   frame_id, receipt.toSec(), delay_s, receive_stamps_->clockSteps());
+    else
+      NODELET_WARN("scan %u: its stamp would not have advanced past the previous scan's (received at %.3f s): "
+                   "stamped %.3f s, the sensor clock's interval after it, so that no scan is refused as out of "
+                   "order. The sensor clock stands still or ROS time stalls; with a PTP-synchronised sensor use "
+                   "stamp_source: sensor_clock. %zu scans restamped so far",
+                   frame_id, receipt.toSec(), stamped.toSec(), receive_stamps_->repaired());
+  } else if ((stamp.receipt_delay_ns >= ReceiveTimeStamps::kLateReceipt_ns ||
+              stamp.receipt_delay_ns <= -ReceiveTimeStamps::kEarlyReceipt_ns) &&
+             receipt_log_.allow(parameters_.statistics_period_s)) {
+    if (stamp.receipt_delay_ns > 0)
+      NODELET_WARN("scan %u read %.2f s late: the process stalled or fell behind (heavy load, a paused machine, "
+                   "packets queued). Stamped from the sensor clock, not the late receipt; %zu scans late so far",
+                   frame_id, delay_s, receive_stamps_->lateReceipts());
+    else
+      NODELET_WARN("scan %u received %.2f s before its sensor time mapped onto ROS time: ROS time stood still or "
+                   "lagged (a bag's /clock delivered late on a loaded machine: replay slower, e.g. rate:=0.5). "
+                   "Stamped from the sensor clock; %zu scans early so far",
+                   frame_id, -delay_s, receive_stamps_->earlyReceipts());
+  }
+  return stamped;
+}
+
+AdapterNodelet::StampCounts AdapterNodelet::stampCounts() const {
+  if (!receive_stamps_) return {};
+  return {receive_stamps_->repaired(), receive_stamps_->clockSteps(), receive_stamps_->lateReceipts(),
+          receive_stamps_->earlyReceipts()};
 }
 
 // WARN while anything was dropped or restamped within the last statistics
@@ -493,10 +523,11 @@ ros::Time AdapterNodelet::receiveStamp(uint32_t frame_id, uint64_t sensor_stamp_
 void AdapterNodelet::diagnosePackets(diagnostic_updater::DiagnosticStatusWrapper& status) {
   const BatcherStatistics batcher = batcherStatistics();
   const std::size_t packet_drops = batcher.wrong_size + batcher.malformed + batcher.bad_checksum + batcher.stale;
-  const std::size_t restamped = receive_stamps_ ? receive_stamps_->repaired() : 0;
-  const std::array<std::size_t, 3> problems{packet_drops + drops_.total(), batcher.incomplete_scans, restamped};
+  const StampCounts stamps = stampCounts();
+  const std::array<std::size_t, 4> problems{packet_drops + drops_.total(), batcher.incomplete_scans,
+                                            stamps.restamped + stamps.clock_steps, stamps.late + stamps.early};
   const ros::SteadyTime now = ros::SteadyTime::now();
-  std::array<bool, 3> recent{};
+  std::array<bool, 4> recent{};
   for (std::size_t kind = 0; kind < problems.size(); ++kind) {
     if (problems[kind] != diagnosed_packet_problems_[kind]) last_packet_problem_[kind] = now;
     diagnosed_packet_problems_[kind] = problems[kind];
@@ -509,14 +540,17 @@ void AdapterNodelet::diagnosePackets(diagnostic_updater::DiagnosticStatusWrapper
                        " or set metadata_file; packets wait for it");
   } else if (batcher.packets == 0) {
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "no packets on " + input_subscriber_.getTopic());
-  } else if (recent[0] || recent[1] || recent[2]) {
+  } else if (recent[0] || recent[1] || recent[2] || recent[3]) {
     std::string summary = "in the last " + std::to_string(int(parameters_.statistics_period_s)) + " s:";
     if (recent[0]) summary += " packets or scans dropped (see the counts);";
     if (recent[1])
       summary += " incomplete scans (packets lost on the network, or packet_queue_size too small for the replay);";
     if (recent[2])
-      summary += " scans restamped because ROS time stood still (a late /clock on a loaded machine: replay "
-                 "slower, or use stamp_source sensor_clock with a synchronised sensor);";
+      summary += " scans restamped or clock steps (ROS time or the sensor clock stood still or was set: see the "
+                 "log; with a synchronised sensor use stamp_source sensor_clock);";
+    if (recent[3])
+      summary += " scans received late (the process stalled or fell behind) or early (a late /clock on a loaded "
+                 "machine: replay slower), stamped from the sensor clock;";
     summary.pop_back();
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, summary);
   } else {
@@ -533,7 +567,10 @@ void AdapterNodelet::diagnosePackets(diagnostic_updater::DiagnosticStatusWrapper
   status.add("messages dropped: not Ouster packets", drops_.foreign_packet_messages);
   status.add("packets dropped: no metadata", drops_.packets_without_metadata);
   status.add("scans failed", drops_.failed_scans);
-  status.add("scans restamped (ROS time stood still)", restamped);
+  status.add("scans restamped (stamp would not advance)", stamps.restamped);
+  status.add("clock steps (stamps follow the receipt anew)", stamps.clock_steps);
+  status.add("scans received late (stall)", stamps.late);
+  status.add("scans received early (ROS time stood still)", stamps.early);
   status.add("stamp source", parameters_.stamp_source == StampSource::kSensorClock ? "sensor_clock" : "receive_time");
 }
 
@@ -542,7 +579,15 @@ void AdapterNodelet::diagnosePackets(diagnostic_updater::DiagnosticStatusWrapper
 void AdapterNodelet::onIdleCheck(const ros::SteadyTimerEvent&) {
   try {
     if (!batcher_ || !revolution_in_progress_) return;
-    if ((ros::SteadyTime::now() - last_packet_time_).toSec() < parameters_.flush_after_idle_s) return;
+    if ((ros::SteadyTime::now() - last_packet_time_).toSec() < parameters_.flush_after_idle_s) {
+      idle_checks_ = 0;
+      return;
+    }
+    // Idle on two checks in a row: after a stall of this process the first
+    // check can run before the packets queued meanwhile, and would cut their
+    // revolution short.
+    if (++idle_checks_ < 2) return;
+    idle_checks_ = 0;
     revolution_in_progress_ = false;
     batcher_->flush();
   } catch (const std::exception& error) {
@@ -813,15 +858,18 @@ void AdapterNodelet::onStatisticsTimer(const ros::SteadyTimerEvent&) {
   const std::size_t point_drops = projected.outside_model - projected_before.outside_model;
   const std::size_t missing_clouds = cloud_gaps_.missing() - logged_missing_clouds_;
   const std::size_t other_drops = drops_.total() - logged_drops_.total() + missing_clouds;
-  const std::size_t restamped_scans = receive_stamps_ ? receive_stamps_->repaired() : 0;
-  const std::size_t restamped = restamped_scans - logged_restamped_scans_;
-  if (packet_drops + incomplete + point_drops + other_drops + restamped > 0) {
+  const StampCounts stamps = stampCounts();
+  const std::size_t restamped = stamps.restamped - logged_stamp_counts_.restamped;
+  const std::size_t clock_steps = stamps.clock_steps - logged_stamp_counts_.clock_steps;
+  const std::size_t late = stamps.late - logged_stamp_counts_.late;
+  const std::size_t early = stamps.early - logged_stamp_counts_.early;
+  if (packet_drops + incomplete + point_drops + other_drops + restamped + clock_steps + late + early > 0) {
     NODELET_WARN(
         "last %.0f s: packets dropped %zu (wrong size %zu, malformed %zu, bad checksum %zu, stale %zu, "
         "not Ouster packets %zu, no metadata %zu); incomplete scans %zu (%zu columns missing); "
         "points outside the model %zu (no-return points, not counted: NaN %zu, at the origin %zu); "
         "clouds rejected %zu, missing %zu (from the stamps); "
-        "scans failed %zu; scans restamped (ROS time stood still) %zu",
+        "scans failed %zu; scans restamped %zu, clock steps %zu, received late %zu, early %zu",
         parameters_.statistics_period_s, packet_drops, batcher.wrong_size - before.wrong_size,
         batcher.malformed - before.malformed, batcher.bad_checksum - before.bad_checksum,
         batcher.stale - before.stale,
@@ -831,9 +879,9 @@ void AdapterNodelet::onStatisticsTimer(const ros::SteadyTimerEvent&) {
         projected.non_finite - projected_before.non_finite,
         projected.no_return - projected_before.no_return,
         drops_.rejected_clouds - logged_drops_.rejected_clouds, missing_clouds,
-        drops_.failed_scans - logged_drops_.failed_scans, restamped);
+        drops_.failed_scans - logged_drops_.failed_scans, restamped, clock_steps, late, early);
   }
-  logged_restamped_scans_ = restamped_scans;
+  logged_stamp_counts_ = stamps;
   logged_batcher_statistics_ = batcher;
   logged_projection_statistics_ = projection_statistics_;
   logged_drops_ = drops_;

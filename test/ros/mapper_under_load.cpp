@@ -5,7 +5,9 @@
 // figures under load (scan-to-map latency, scans waiting for a pose, mesh
 // updates deferred) are printed for the record. The test listens to the mesh
 // as rviz would, so the Mapper meshes while it integrates (nobody listening,
-// it would not mesh at all).
+// it would not mesh at all). A third of the way in, the nodelet manager is
+// stopped (SIGSTOP) for longer than a nodelet bond's heartbeat timeout (4 s),
+// as a stalled machine stops it: the pipeline must go on where it stopped.
 #include "rostest_main.h"
 #include "spin_until.h"
 
@@ -22,7 +24,11 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <map>
 #include <set>
 #include <string>
@@ -56,6 +62,38 @@ class BusyCore {
   pid_t pid_ = -1;
 };
 
+// The process whose command line holds `argument` (roslaunch names a node by
+// `__name:=NAME`), or -1.
+pid_t processWithArgument(const std::string& argument) {
+  for (const std::filesystem::directory_entry& entry : std::filesystem::directory_iterator("/proc")) {
+    const std::string pid = entry.path().filename();
+    if (pid.find_first_not_of("0123456789") != std::string::npos) continue;
+    std::ifstream file(entry.path() / "cmdline", std::ios::binary);
+    const std::string command_line{std::istreambuf_iterator<char>(file), std::istreambuf_iterator<char>()};
+    for (std::size_t start = 0; start < command_line.size();) {  // NUL-separated arguments
+      const std::size_t end = std::min(command_line.find('\0', start), command_line.size());
+      if (command_line.compare(start, end - start, argument) == 0) return pid_t(std::stol(pid));
+      start = end + 1;
+    }
+  }
+  return -1;
+}
+
+// A process held stopped for the object's lifetime (continued also when a
+// failed assertion leaves the scope).
+class StoppedProcess {
+ public:
+  explicit StoppedProcess(pid_t pid) : pid_(pid), stopped_(pid > 0 && kill(pid, SIGSTOP) == 0) {}
+  ~StoppedProcess() {
+    if (stopped_) kill(pid_, SIGCONT);
+  }
+  bool stopped() const { return stopped_; }
+
+ private:
+  pid_t pid_;
+  bool stopped_;
+};
+
 // A nodelet's status values, the last message's and the largest seen.
 struct NodeletStatus {
   std::map<std::string, std::string> last;
@@ -76,6 +114,8 @@ TEST(MapperUnderLoad, EveryScanReachesTheOdometryAndTheMap) {
   ros::NodeHandle node, private_node("~");
   const int frames = private_node.param("frames", 300);
   const double timeout_s = private_node.param("timeout", 420.0);
+  const double stall_s = private_node.param("manager_stall", 6.0);
+  const std::string manager_name = private_node.param<std::string>("manager", "rim_manager");
 
   std::set<double> odometry_stamps;
   ros::Subscriber odometry_subscriber = node.subscribe<nav_msgs::Odometry>(
@@ -136,11 +176,27 @@ TEST(MapperUnderLoad, EveryScanReachesTheOdometryAndTheMap) {
   resume.request.data = false;
   ASSERT_TRUE(ros::service::call(resume_service, resume) && resume.response.success)
       << "the replay did not start: " << resume.response.message;
+  const auto started = std::chrono::steady_clock::now();
+  const auto elapsed_s = [&] {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  };
+  // The stall, once a third of the scans are posed (the Mapper is behind then).
+  const pid_t manager_pid = processWithArgument("__name:=" + manager_name);
+  ASSERT_GT(manager_pid, 0) << "no process named " << manager_name;
+  ASSERT_TRUE(spinUntil([&] { return int(odometry_stamps.size()) >= frames / 3; }, timeout_s))
+      << "a third of the scans were not posed within " << timeout_s << " s";
+  {
+    const StoppedProcess stall(manager_pid);
+    ASSERT_TRUE(stall.stopped()) << "could not stop the manager (pid " << manager_pid << ")";
+    spinUntil([] { return false; }, stall_s);
+  }
   const bool done = spinUntil(
       [&] {
         return int(odometry_stamps.size()) >= frames && mapper.value("total scans integrated") >= frames;
       },
-      timeout_s);
+      timeout_s - elapsed_s());
+  const double waited_s = elapsed_s();
+  const bool node_shut_down = !ros::ok();
   // Meshing slows under load (it waits while the Mapper is behind), so the
   // mesh may reach this node only after the last scan; at most a minute.
   if (done) spinUntil([&] { return mesh_markers > 0 && mapper.value("triangles") > 0.0; }, 60.0);
@@ -151,15 +207,17 @@ TEST(MapperUnderLoad, EveryScanReachesTheOdometryAndTheMap) {
   const int packets_per_scan = 1024 / 16;  // outdoor_car's OS1-128: 1024 columns, 16 per packet
   char summary[2048];
   std::snprintf(summary, sizeof(summary),
-                "under load: adapter: %s of %d packets, %s scans (%s incomplete, %s restamped); odometry: %s "
+                "under load: adapter: %s of %d packets, %s scans (%s incomplete, %s read late, %s early, %s restamped, %s clock steps); odometry: %s "
                 "scans received, %s stepped, %s published, %s out of order, %s held for tf base -> lidar, %s "
                 "dropped frames; %zu odometry messages here; mapper: %s scans received, %s integrated, %s without "
                 "pose, %s lost before; max scan-to-map latency %.0f ms, max scans waiting for a pose %.0f, mean pose "
                 "wait up to %.1f ms, %.0f mesh updates deferred, mean integration up to %.1f ms, mean mesh update up to "
                 "%.1f ms, triangles %s (%s shown); %zu mesh messages (%zu markers) here",
                 adapter.last["packets"].c_str(), frames * packets_per_scan, adapter.last["scans"].c_str(),
-                adapter.last["incomplete scans"].c_str(),
-                adapter.last["scans restamped (ROS time stood still)"].c_str(),
+                adapter.last["incomplete scans"].c_str(), adapter.last["scans received late (stall)"].c_str(),
+                adapter.last["scans received early (ROS time stood still)"].c_str(),
+                adapter.last["scans restamped (stamp would not advance)"].c_str(),
+                adapter.last["clock steps (stamps follow the receipt anew)"].c_str(),
                 odometry.last["total scans received"].c_str(), odometry.last["total scans stepped"].c_str(),
                 odometry.last["total scans published"].c_str(), odometry.last["total out of order"].c_str(),
                 odometry.last["total scans held for tf (base_frame -> lidar)"].c_str(),
@@ -173,8 +231,10 @@ TEST(MapperUnderLoad, EveryScanReachesTheOdometryAndTheMap) {
                 mapper.last["triangles shown"].c_str(), mesh_messages, mesh_markers);
   std::printf("%s\n", summary);
   SCOPED_TRACE(summary);  // in every failure message below, so a CI log's summary has the figures
-  EXPECT_TRUE(done) << "not every scan arrived within " << timeout_s << " s; last warning: "
-                    << mapper.last["last warning"];
+  EXPECT_FALSE(node_shut_down) << "this node was shut down after " << waited_s
+                               << " s: roslaunch ends the launch when a required node (the Mapper's loader) exits";
+  EXPECT_TRUE(done) << "not every scan arrived within " << waited_s << " s (limit " << timeout_s
+                    << " s); last warning: " << mapper.last["last warning"];
   EXPECT_EQ(adapter.value("scans"), frames) << "scans the Adapter assembled from the packets";
   EXPECT_EQ(odometry.value("total scans published"), frames) << "last warning: " << odometry.last["last warning"];
   EXPECT_EQ(int(odometry_stamps.size()), frames) << "scans posed by the odometry, as this node received them";
