@@ -2,21 +2,21 @@
 // (stamp_source receive_time): the sensor clock mapped onto ROS time,
 //   stamp = sensor time + offset,
 // where the offset (ROS time minus sensor time) follows the receipt of each
-// revolution's first packet. A receipt is never early, only late: a process
-// that stalled (heavy load, a paused machine) reads a backlog of packets at
-// once, and stamping each scan with its receipt bunched the backlog's scans
-// 0.1 s apart into milliseconds, so that the Odometry refused them as out of
-// order. The offset therefore moves towards a receipt by at most kDriftRate
-// of the sensor time passed (1 %, far beyond any quartz clock's drift), and a
-// late receipt, or an early one under a /clock that stood still, shifts the
-// stamps by at most that much. Two cases re-anchor the offset to the receipt,
-// counted as clock steps: the sensor clock went back or leapt ahead of the
-// receipts, or the receipts stayed more than kStep off the mapping while
-// keeping the sensor clock's pace for kStepConfirm (ROS time was stepped).
-// Stamps are kept strictly increasing: a stamp that would not advance (a
-// sensor clock that stands still, so the receipts are all there is) is put
-// the sensor clock's interval, or the nominal period, after the previous one,
-// and counted as repaired.
+// revolution's first packet. Against a running ROS clock a receipt can only be
+// late: a process that stalled (heavy load, a paused machine) reads its
+// backlog at once, and the receipts would stamp scans 0.1 s apart within
+// milliseconds of each other. It is early only when ROS time itself lags (a
+// bag's /clock delivered late). So the offset moves towards a receipt by at
+// most kDriftRate of the sensor time passed (1 %, far beyond any quartz
+// clock's drift), and a late or early receipt shifts the stamps by at most
+// that much. Two cases re-anchor the offset to the receipt, counted as clock
+// steps: the sensor clock went back or leapt ahead of the receipts, or the
+// receipts stayed more than kStep off the mapping while keeping the sensor
+// clock's pace for kStepConfirm (ROS time was stepped). Stamps are kept
+// strictly increasing: a stamp that would not advance (a sensor clock that
+// stands still, so the receipts are all there is) is put the sensor clock's
+// interval, or the nominal period, after the previous one, and counted as
+// repaired.
 #pragma once
 
 #include <cstddef>
