@@ -213,7 +213,7 @@ class AdapterNodelet : public nodelet::Nodelet {
   StampCounts logged_stamp_counts_;
   bool revolution_in_progress_ = false;
   ros::SteadyTime last_packet_time_;
-  int idle_checks_ = 0;  // onIdleCheck calls in a row that found no packet for flush_after_idle
+  ros::SteadyTime first_idle_check_;  // the first of the onIdleCheck calls in a row that found no packet
   ros::Time last_receipt_;  // to notice ROS time jumping back (a bag loop)
   // diagnosePackets, per kind of problem (drops, incomplete scans, restamped
   // scans and clock steps, late or early receipts): the count at its previous
@@ -579,15 +579,17 @@ void AdapterNodelet::diagnosePackets(diagnostic_updater::DiagnosticStatusWrapper
 void AdapterNodelet::onIdleCheck(const ros::SteadyTimerEvent&) {
   try {
     if (!batcher_ || !revolution_in_progress_) return;
-    if ((ros::SteadyTime::now() - last_packet_time_).toSec() < parameters_.flush_after_idle_s) {
-      idle_checks_ = 0;
+    const ros::SteadyTime now = ros::SteadyTime::now();
+    if ((now - last_packet_time_).toSec() < parameters_.flush_after_idle_s) {
+      first_idle_check_ = ros::SteadyTime();
       return;
     }
-    // Idle on two checks in a row: after a stall of this process the first
-    // check can run before the packets queued meanwhile, and would cut their
-    // revolution short.
-    if (++idle_checks_ < 2) return;
-    idle_checks_ = 0;
+    // Idle on two checks a quarter of flush_after_idle apart: after a stall of
+    // this process its timer's callbacks can run before the packets queued
+    // meanwhile, and would cut their revolution short.
+    if (first_idle_check_.isZero()) first_idle_check_ = now;
+    if ((now - first_idle_check_).toSec() < parameters_.flush_after_idle_s / 4) return;
+    first_idle_check_ = ros::SteadyTime();
     revolution_in_progress_ = false;
     batcher_->flush();
   } catch (const std::exception& error) {
