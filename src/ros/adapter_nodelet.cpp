@@ -492,8 +492,8 @@ ros::Time AdapterNodelet::receiveStamp(uint32_t frame_id, uint64_t sensor_stamp_
                    frame_id, receipt.toSec(), delay_s, receive_stamps_->clockSteps());
     else
       NODELET_WARN("scan %u: its stamp would not have advanced past the previous scan's (received at %.3f s): "
-                   "stamped %.3f s, the sensor clock's interval after it, so that no scan is refused as out of "
-                   "order. The sensor clock stands still or ROS time stalls; with a PTP-synchronised sensor use "
+                   "stamped %.3f s, the sensor clock's interval (or the nominal period) after it, so that no scan "
+                   "is refused as out of order. The sensor clock stands still or ROS time stalls; with a PTP-synchronised sensor use "
                    "stamp_source: sensor_clock. %zu scans restamped so far",
                    frame_id, receipt.toSec(), stamped.toSec(), receive_stamps_->repaired());
   } else if ((stamp.receipt_delay_ns >= ReceiveTimeStamps::kLateReceipt_ns ||
