@@ -70,9 +70,9 @@ TEST(ReceiveTimeStamps, AStandingClockKeepsTheSpacingOfARealCapture) {
         << "spaced by the sensor clock";
     EXPECT_FALSE(out[i].repaired);
   }
-  EXPECT_EQ(stamps.earlyReceipts(), 2u) << "counted: ROS time stood still";
-  EXPECT_EQ(stamps.repaired(), 0u);
-  EXPECT_EQ(stamps.clockSteps(), 0u);
+  EXPECT_EQ(stamps.counts().early, 2u) << "counted: ROS time stood still";
+  EXPECT_EQ(stamps.counts().restamped, 0u);
+  EXPECT_EQ(stamps.counts().clock_steps, 0u);
 }
 
 TEST(ReceiveTimeStamps, ABacklogReadAtOnceAfterAStallKeepsItsStamps) {
@@ -95,10 +95,10 @@ TEST(ReceiveTimeStamps, ABacklogReadAtOnceAfterAStallKeepsItsStamps) {
   EXPECT_LT(std::llabs(out.back().stamp_ns - undisturbed.back()), 4'000'000) << "back on the receipts after it";
   // Scans 100-155 are read 0.5 s or more late, less the offset's rise of up
   // to 1 ms a scan over the stall.
-  EXPECT_GE(stamps.lateReceipts(), 50u);
-  EXPECT_LE(stamps.lateReceipts(), 56u);
-  EXPECT_EQ(stamps.clockSteps(), 0u) << "a stall is not a clock step";
-  EXPECT_EQ(stamps.repaired(), 0u);
+  EXPECT_GE(stamps.counts().late, 50u);
+  EXPECT_LE(stamps.counts().late, 56u);
+  EXPECT_EQ(stamps.counts().clock_steps, 0u) << "a stall is not a clock step";
+  EXPECT_EQ(stamps.counts().restamped, 0u);
   // The receipts themselves bunch the backlog's scans 1 ms apart.
   EXPECT_EQ(sequence.receipt_ns[101] - sequence.receipt_ns[100], 1'000'000);
 }
@@ -115,9 +115,9 @@ TEST(ReceiveTimeStamps, ABacklogReadWhileROSTimeStoodStillKeepsItsStamps) {
   expectIncreasing(out);
   for (std::size_t i = 0; i < out.size(); ++i)
     EXPECT_NEAR(double(out[i].stamp_ns), double(undisturbed[i]), 3e6 + 0.01 * 6e9) << "scan " << i;
-  EXPECT_EQ(stamps.clockSteps(), 0u) << "a standing clock is not a step";
-  EXPECT_EQ(stamps.repaired(), 0u);
-  EXPECT_GE(stamps.earlyReceipts(), 50u);
+  EXPECT_EQ(stamps.counts().clock_steps, 0u) << "a standing clock is not a step";
+  EXPECT_EQ(stamps.counts().restamped, 0u);
+  EXPECT_GE(stamps.counts().early, 50u);
 }
 
 TEST(ReceiveTimeStamps, ROSTimeSteppedForwardIsFollowedAndCounted) {
@@ -126,7 +126,7 @@ TEST(ReceiveTimeStamps, ROSTimeSteppedForwardIsFollowedAndCounted) {
   ReceiveTimeStamps stamps(kPeriod_ns);
   const std::vector<ReceiveTimeStamps::Stamp> out = sequence.stamp(stamps);
   expectIncreasing(out);
-  EXPECT_EQ(stamps.clockSteps(), 1u);
+  EXPECT_EQ(stamps.counts().clock_steps, 1u);
   int step = -1;
   for (int i = 0; i < 300; ++i)
     if (out[i].clock_step) step = i;
@@ -141,8 +141,8 @@ TEST(ReceiveTimeStamps, ROSTimeSteppedBackAndABagLoopGoBack) {
   for (int i = 100; i < 300; ++i) sequence.receipt_ns[i] -= kSecond_ns / 2;  // host clock set back 0.5 s
   ReceiveTimeStamps stamps(kPeriod_ns);
   std::vector<ReceiveTimeStamps::Stamp> out = sequence.stamp(stamps);
-  EXPECT_EQ(stamps.clockSteps(), 1u);
-  EXPECT_EQ(stamps.repaired(), 0u) << "the step is taken as it is, not bridged";
+  EXPECT_EQ(stamps.counts().clock_steps, 1u);
+  EXPECT_EQ(stamps.counts().restamped, 0u) << "the step is taken as it is, not bridged";
   EXPECT_LT(std::llabs(out.back().stamp_ns - sequence.receipt_ns.back()), 4'000'000);
 
   // A bag loop: ROS time and the sensor clock both back to the start.
@@ -156,7 +156,7 @@ TEST(ReceiveTimeStamps, ROSTimeSteppedBackAndABagLoopGoBack) {
   // The nodelet restarts the sequence when it sees ROS time go back: no step.
   stamps.restart();
   EXPECT_FALSE(stamps.next(sequence.receipt_ns[0], sequence.sensor_ns[5]).clock_step);
-  EXPECT_EQ(stamps.clockSteps(), 3u);
+  EXPECT_EQ(stamps.counts().clock_steps, 3u);
 }
 
 TEST(ReceiveTimeStamps, ASensorClockResetIsAStepAStandingOneFallsBackOnTheReceipts) {
@@ -165,7 +165,7 @@ TEST(ReceiveTimeStamps, ASensorClockResetIsAStepAStandingOneFallsBackOnTheReceip
   ReceiveTimeStamps stamps(kPeriod_ns);
   const std::vector<ReceiveTimeStamps::Stamp> out = sequence.stamp(stamps);
   EXPECT_TRUE(out[50].clock_step);
-  EXPECT_EQ(stamps.clockSteps(), 1u);
+  EXPECT_EQ(stamps.counts().clock_steps, 1u);
   expectIncreasing(out);
   for (int i = 50; i < 100; ++i) EXPECT_LT(std::llabs(out[i].stamp_ns - sequence.receipt_ns[i]), 4'000'000);
 
@@ -176,8 +176,8 @@ TEST(ReceiveTimeStamps, ASensorClockResetIsAStepAStandingOneFallsBackOnTheReceip
   const ReceiveTimeStamps::Stamp lagging = unclocked.next(5'080'000'000, 0);  // ROS time 20 ms behind
   EXPECT_TRUE(lagging.repaired);
   EXPECT_EQ(lagging.stamp_ns, 5'100'000'000 + kPeriod_ns) << "the nominal period after the previous stamp";
-  EXPECT_EQ(unclocked.clockSteps(), 0u);
-  EXPECT_EQ(unclocked.repaired(), 1u);
+  EXPECT_EQ(unclocked.counts().clock_steps, 0u);
+  EXPECT_EQ(unclocked.counts().restamped, 1u);
 }
 
 TEST(ReceiveTimeStamps, ASensorClockDriftingAgainstROSTimeIsTracked) {
@@ -188,7 +188,7 @@ TEST(ReceiveTimeStamps, ASensorClockDriftingAgainstROSTimeIsTracked) {
   expectIncreasing(out);
   for (std::size_t i = 0; i < out.size(); ++i)
     ASSERT_LT(std::llabs(out[i].stamp_ns - sequence.receipt_ns[i]), 4'000'000) << "scan " << i;
-  EXPECT_EQ(stamps.clockSteps() + stamps.repaired() + stamps.lateReceipts() + stamps.earlyReceipts(), 0u);
+  EXPECT_EQ(stamps.counts().clock_steps + stamps.counts().restamped + stamps.counts().late + stamps.counts().early, 0u);
 }
 
 TEST(ReceiveTimeStamps, ANominalPeriodOutsideASecondIsRefused) {

@@ -44,13 +44,15 @@ class ReceiveTimeStamps {
   void setNominalPeriod(int64_t nominal_period_ns);
   // ROS time jumped back: the next receipt starts a new sequence.
   void restart() { has_previous_ = false; }
-  std::size_t repaired() const { return repaired_; }
-  std::size_t clockSteps() const { return clock_steps_; }
-  // Scans read kLateReceipt or more after the mapping says they were sent
-  // (a stall or a backlog), and kEarlyReceipt or more before it (ROS time
-  // stood still or lagged: a late /clock).
-  std::size_t lateReceipts() const { return late_receipts_; }
-  std::size_t earlyReceipts() const { return early_receipts_; }
+  struct Counts {
+    std::size_t restamped = 0;    // stamps repaired to keep them increasing
+    std::size_t clock_steps = 0;  // offsets set anew
+    // Scans read kLateReceipt or more after the mapping says they were sent
+    // (a stall or a backlog), and kEarlyReceipt or more before it (ROS time
+    // stood still or lagged: a late /clock).
+    std::size_t late = 0, early = 0;
+  };
+  const Counts& counts() const { return counts_; }
 
   static constexpr double kDriftRate = 0.01;
   static constexpr int64_t kStep_ns = 250'000'000;
@@ -69,10 +71,7 @@ class ReceiveTimeStamps {
   int64_t previous_sensor_ns_ = 0;
   int64_t previous_receipt_ns_ = 0;
   int64_t step_evidence_ns_ = 0;  // sensor time over which the receipts kept pace kStep away
-  std::size_t repaired_ = 0;
-  std::size_t clock_steps_ = 0;
-  std::size_t late_receipts_ = 0;
-  std::size_t early_receipts_ = 0;
+  Counts counts_;
 };
 
 }  // namespace range_image_mapping

@@ -459,7 +459,8 @@ void plotTrajectoryTopView(const TrajectoryEvaluation& evaluation, const std::st
          << "stats " << quoted(data_path) << " using 5 nooutput\n"
          << "if (STATS_max <= STATS_min) { set cbrange [STATS_min:STATS_min + 1e-3] }\n"
          // After stats, which would filter the errors column by the x range.
-         << topViewRangeCommands(plotted) << "plot " << quoted(data_path) << " using 1:2 with lines lw 3 lc rgb '#999999' title 'ground truth', \\\n"
+         << topViewRangeCommands(plotted) << "plot " << quoted(data_path)
+         << " using 1:2 with lines lw 3 lc rgb '#999999' title 'ground truth', \\\n"
          << "     " << quoted(data_path) << " using 3:4:5 with lines lw 2 palette title 'estimate (aligned)'\n";
   runGnuplot(directory, script.str(), png_path);
 }

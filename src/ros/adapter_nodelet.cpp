@@ -206,11 +206,10 @@ class AdapterNodelet : public nodelet::Nodelet {
   ros::Time current_frame_receipt_, previous_frame_receipt_;
   // Receive-time stamps: the sensor clock mapped onto ROS time.
   std::optional<ReceiveTimeStamps> receive_stamps_;
-  struct StampCounts {
-    std::size_t restamped = 0, clock_steps = 0, late = 0, early = 0;
-  };
-  StampCounts stampCounts() const;
-  StampCounts logged_stamp_counts_;
+  ReceiveTimeStamps::Counts stampCounts() const {
+    return receive_stamps_ ? receive_stamps_->counts() : ReceiveTimeStamps::Counts{};
+  }
+  ReceiveTimeStamps::Counts logged_stamp_counts_;
   bool revolution_in_progress_ = false;
   ros::SteadyTime last_packet_time_;
   ros::SteadyTime first_idle_check_;  // the first of the onIdleCheck calls in a row that found no packet
@@ -489,33 +488,27 @@ ros::Time AdapterNodelet::receiveStamp(uint32_t frame_id, uint64_t sensor_stamp_
       NODELET_WARN("scan %u: received at %.3f s, %.3f s off the sensor clock's mapping onto ROS time: ROS time or "
                    "the sensor clock stepped (host clock set, a bag loop, the sensor's clock reset or "
                    "synchronised). Stamps follow the receipt from here (%zu clock steps so far)",
-                   frame_id, receipt.toSec(), delay_s, receive_stamps_->clockSteps());
+                   frame_id, receipt.toSec(), delay_s, receive_stamps_->counts().clock_steps);
     else
       NODELET_WARN("scan %u: its stamp would not have advanced past the previous scan's (received at %.3f s): "
                    "stamped %.3f s, the sensor clock's interval (or the nominal period) after it, so that no scan "
-                   "is refused as out of order. The sensor clock stands still or ROS time stalls; with a PTP-synchronised sensor use "
-                   "stamp_source: sensor_clock. %zu scans restamped so far",
-                   frame_id, receipt.toSec(), stamped.toSec(), receive_stamps_->repaired());
+                   "is refused as out of order. The sensor clock stands still or ROS time stalls; with a "
+                   "PTP-synchronised sensor use stamp_source: sensor_clock. %zu scans restamped so far",
+                   frame_id, receipt.toSec(), stamped.toSec(), receive_stamps_->counts().restamped);
   } else if ((stamp.receipt_delay_ns >= ReceiveTimeStamps::kLateReceipt_ns ||
               stamp.receipt_delay_ns <= -ReceiveTimeStamps::kEarlyReceipt_ns) &&
              receipt_log_.allow(parameters_.statistics_period_s)) {
     if (stamp.receipt_delay_ns > 0)
       NODELET_WARN("scan %u read %.2f s late: the process stalled or fell behind (heavy load, a paused machine, "
                    "packets queued). Stamped from the sensor clock, not the late receipt; %zu scans late so far",
-                   frame_id, delay_s, receive_stamps_->lateReceipts());
+                   frame_id, delay_s, receive_stamps_->counts().late);
     else
       NODELET_WARN("scan %u received %.2f s before its sensor time mapped onto ROS time: ROS time stood still or "
                    "lagged (a bag's /clock delivered late on a loaded machine: replay slower, e.g. rate:=0.5). "
                    "Stamped from the sensor clock; %zu scans early so far",
-                   frame_id, -delay_s, receive_stamps_->earlyReceipts());
+                   frame_id, -delay_s, receive_stamps_->counts().early);
   }
   return stamped;
-}
-
-AdapterNodelet::StampCounts AdapterNodelet::stampCounts() const {
-  if (!receive_stamps_) return {};
-  return {receive_stamps_->repaired(), receive_stamps_->clockSteps(), receive_stamps_->lateReceipts(),
-          receive_stamps_->earlyReceipts()};
 }
 
 // WARN while anything was dropped or restamped within the last statistics
@@ -523,7 +516,7 @@ AdapterNodelet::StampCounts AdapterNodelet::stampCounts() const {
 void AdapterNodelet::diagnosePackets(diagnostic_updater::DiagnosticStatusWrapper& status) {
   const BatcherStatistics batcher = batcherStatistics();
   const std::size_t packet_drops = batcher.wrong_size + batcher.malformed + batcher.bad_checksum + batcher.stale;
-  const StampCounts stamps = stampCounts();
+  const ReceiveTimeStamps::Counts stamps = stampCounts();
   const std::array<std::size_t, 4> problems{packet_drops + drops_.total(), batcher.incomplete_scans,
                                             stamps.restamped + stamps.clock_steps, stamps.late + stamps.early};
   const ros::SteadyTime now = ros::SteadyTime::now();
@@ -860,7 +853,7 @@ void AdapterNodelet::onStatisticsTimer(const ros::SteadyTimerEvent&) {
   const std::size_t point_drops = projected.outside_model - projected_before.outside_model;
   const std::size_t missing_clouds = cloud_gaps_.missing() - logged_missing_clouds_;
   const std::size_t other_drops = drops_.total() - logged_drops_.total() + missing_clouds;
-  const StampCounts stamps = stampCounts();
+  const ReceiveTimeStamps::Counts stamps = stampCounts();
   const std::size_t restamped = stamps.restamped - logged_stamp_counts_.restamped;
   const std::size_t clock_steps = stamps.clock_steps - logged_stamp_counts_.clock_steps;
   const std::size_t late = stamps.late - logged_stamp_counts_.late;

@@ -31,10 +31,10 @@ ReceiveTimeStamps::Stamp ReceiveTimeStamps::next(int64_t receipt_ns, int64_t sen
     const int64_t excess_ns = receipt_ns - sensor_ns - offset_ns_;  // > 0: read late; < 0: ROS time behind
     stamp.receipt_delay_ns = excess_ns;
     const int64_t receipt_interval_ns = receipt_ns - previous_receipt_ns_;
-    const bool keeps_pace = std::llabs(receipt_interval_ns - sensor_interval_ns) <= std::llabs(sensor_interval_ns) / 4;
-    step_evidence_ns_ =
-        std::llabs(excess_ns) > kStep_ns && keeps_pace && sensor_interval_ns > 0 ? step_evidence_ns_ + sensor_interval_ns
-                                                                                 : 0;
+    const bool keeps_pace =
+        std::llabs(receipt_interval_ns - sensor_interval_ns) <= std::llabs(sensor_interval_ns) / 4;
+    const bool off_at_pace = std::llabs(excess_ns) > kStep_ns && keeps_pace && sensor_interval_ns > 0;
+    step_evidence_ns_ = off_at_pace ? step_evidence_ns_ + sensor_interval_ns : 0;
     // A sensor clock that went back or leapt (seconds that the receipts did
     // not keep pace with), or receipts off the mapping at the sensor's pace
     // for kStepConfirm: a clock step. Receipts far off the mapping but not at
@@ -43,13 +43,13 @@ ReceiveTimeStamps::Stamp ReceiveTimeStamps::next(int64_t receipt_ns, int64_t sen
     if (sensor_interval_ns < 0 || sensor_leapt || step_evidence_ns_ >= kStepConfirm_ns) {
       anchor(receipt_ns, sensor_ns);
       stamp.clock_step = true;
-      ++clock_steps_;
+      ++counts_.clock_steps;
     } else {
       const auto limit_ns =
           static_cast<int64_t>(kDriftRate * static_cast<double>(std::min(sensor_interval_ns, kLongestRepair_ns)));
       offset_ns_ += std::clamp(excess_ns, -limit_ns, limit_ns);
-      if (excess_ns >= kLateReceipt_ns) ++late_receipts_;
-      if (excess_ns <= -kEarlyReceipt_ns) ++early_receipts_;
+      if (excess_ns >= kLateReceipt_ns) ++counts_.late;
+      if (excess_ns <= -kEarlyReceipt_ns) ++counts_.early;
     }
   }
   stamp.stamp_ns = sensor_ns + offset_ns_;
@@ -60,7 +60,7 @@ ReceiveTimeStamps::Stamp ReceiveTimeStamps::next(int64_t receipt_ns, int64_t sen
     const bool usable = sensor_interval_ns > 0 && sensor_interval_ns < kLongestRepair_ns;
     stamp.stamp_ns = previous_stamp_ns_ + (usable ? sensor_interval_ns : nominal_period_ns_);
     stamp.repaired = true;
-    ++repaired_;
+    ++counts_.restamped;
   }
   has_previous_ = true;
   previous_stamp_ns_ = stamp.stamp_ns;

@@ -207,12 +207,13 @@ TEST(MapperUnderLoad, EveryScanReachesTheOdometryAndTheMap) {
   const int packets_per_scan = 1024 / 16;  // outdoor_car's OS1-128: 1024 columns, 16 per packet
   char summary[2048];
   std::snprintf(summary, sizeof(summary),
-                "under load: adapter: %s of %d packets, %s scans (%s incomplete, %s read late, %s early, %s restamped, %s clock steps); odometry: %s "
-                "scans received, %s stepped, %s published, %s out of order, %s held for tf base -> lidar, %s "
-                "dropped frames; %zu odometry messages here; mapper: %s scans received, %s integrated, %s without "
-                "pose, %s lost before; max scan-to-map latency %.0f ms, max scans waiting for a pose %.0f, mean pose "
-                "wait up to %.1f ms, %.0f mesh updates deferred, mean integration up to %.1f ms, mean mesh update up to "
-                "%.1f ms, triangles %s (%s shown); %zu mesh messages (%zu markers) here",
+                "under load: adapter: %s of %d packets, %s scans (%s incomplete, %s read late, %s early, %s "
+                "restamped, %s clock steps); odometry: %s scans received, %s stepped, %s published, %s out of "
+                "order, %s held for tf base -> lidar, %s dropped frames; %zu odometry messages here; mapper: %s "
+                "scans received, %s integrated, %s without pose, %s lost before; max scan-to-map latency %.0f ms, "
+                "max scans waiting for a pose %.0f, mean pose wait up to %.1f ms, %.0f mesh updates deferred, mean "
+                "integration up to %.1f ms, mean mesh update up to %.1f ms, triangles %s (%s shown); %zu mesh "
+                "messages (%zu markers) here",
                 adapter.last["packets"].c_str(), frames * packets_per_scan, adapter.last["scans"].c_str(),
                 adapter.last["incomplete scans"].c_str(), adapter.last["scans received late (stall)"].c_str(),
                 adapter.last["scans received early (ROS time stood still)"].c_str(),
